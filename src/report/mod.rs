@@ -1,0 +1,2 @@
+//! Rendering result structs for people (HTML with inline plots) and pipelines (JSON, CSV).
+//! Nothing outside this module formats text for people.
