@@ -1,0 +1,3 @@
+//! Benchmarks (criterion) for this capability; see reports/performance.md.
+
+fn main() {}
