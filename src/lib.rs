@@ -9,6 +9,7 @@ pub use bonnetlab_calibrate as calibrate;
 pub use bonnetlab_io as io;
 pub use bonnetlab_process as process;
 pub use bonnetlab_spectrum as spectrum;
+pub use bonnetlab_spots as spots;
 pub use bonnetlab_surface as surface;
 pub use bonnetlab_vibration as vibration;
 
