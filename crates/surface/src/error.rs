@@ -9,7 +9,11 @@ pub enum SurfaceError {
     NoValidPixel,
     /// Too few valid pixels for the requested fit or statistic.
     #[error("{needed} valid pixels needed for {what}, only {have} available")]
-    TooFewPixels { what: String, needed: usize, have: usize },
+    TooFewPixels {
+        what: String,
+        needed: usize,
+        have: usize,
+    },
     /// Two maps that must share a grid do not.
     #[error("grid mismatch: {0}")]
     GridMismatch(String),

@@ -6,13 +6,22 @@
 //! - pixel (i, j) has its centre at (x0 + j dx, y0 + i dy) mm;
 //! - invalid pixels are carried by an explicit mask; their stored height is 0.0, never NaN.
 
+pub mod basis;
+pub mod convergence;
 pub mod error;
 pub mod form;
+pub mod lsq;
+pub mod pvr;
 pub mod rng;
 pub mod stats;
 pub mod surface;
 
+pub use convergence::{
+    compare_runs, convergence, convergence_ratio, improvement, repeat_cr, Convergence, RepeatCr,
+    RunComparison, Spread,
+};
 pub use error::SurfaceError;
-pub use form::{remove_terms, FormFit, Term};
+pub use form::{evaluate_fit, fit_terms, remove_terms, FormFit, Term};
+pub use pvr::{pvr, Pvr, PVR_SET};
 pub use stats::{height_stats, HeightStats};
 pub use surface::{Provenance, Surface};

@@ -76,14 +76,18 @@ mod tests {
     fn sine_has_analytic_parameters() {
         // Whole periods: 60 mm at 3 mm pitch, 600 samples.
         let a = 10.0;
-        let z = Array2::from_shape_fn((8, 600), |(_, j)| a * (2.0 * PI * j as f64 * 0.1 / 3.0).sin());
+        let z = Array2::from_shape_fn((8, 600), |(_, j)| {
+            a * (2.0 * PI * j as f64 * 0.1 / 3.0).sin()
+        });
         let s = Surface::new(z, Some(0.1), Some(0.1)).unwrap();
         let st = height_stats(&s).unwrap();
         assert!((st.rms_nm - a / 2f64.sqrt()).abs() < 1e-9);
         assert!(st.ssk.abs() < 1e-9);
         assert!((st.sku - 1.5).abs() < 1e-9);
         // Sa and PV of the sampled sine, by brute force over one period of 30 samples.
-        let samples: Vec<f64> = (0..30).map(|j| a * (2.0 * PI * j as f64 / 30.0).sin()).collect();
+        let samples: Vec<f64> = (0..30)
+            .map(|j| a * (2.0 * PI * j as f64 / 30.0).sin())
+            .collect();
         let sa = samples.iter().map(|v| v.abs()).sum::<f64>() / 30.0;
         let pv = samples.iter().cloned().fold(f64::MIN, f64::max)
             - samples.iter().cloned().fold(f64::MAX, f64::min);
