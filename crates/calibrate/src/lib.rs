@@ -1,2 +1,10 @@
 //! Closing the loop with measured data: registration, residual, diagnosis, an effect library
 //! with hold-out selection, and a generator of synthetic measured runs.
+
+pub mod error;
+pub mod fftconv;
+pub mod grid;
+pub mod path;
+pub mod tif;
+
+pub use error::CalibrateError;

@@ -1,0 +1,258 @@
+//! The map grid (pixel centres at `x0 + j dx`, `y0 + i dy`), bilinear splatting of path
+//! sub-steps into dwell maps on the kernel-extended grid, bilinear sampling of maps at path
+//! positions, masked Gaussian smoothing and a signed distance to the part edge.
+
+use bonnetlab_surface::Surface;
+use ndarray::Array2;
+
+use crate::error::CalibrateError;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapGrid {
+    pub rows: usize,
+    pub cols: usize,
+    pub dx_mm: f64,
+    pub dy_mm: f64,
+    pub x0_mm: f64,
+    pub y0_mm: f64,
+}
+
+impl MapGrid {
+    pub fn of(s: &Surface) -> Result<Self, CalibrateError> {
+        let (dx, dy) = s.pixel_mm("calibration")?;
+        Ok(MapGrid {
+            rows: s.rows(),
+            cols: s.cols(),
+            dx_mm: dx,
+            dy_mm: dy,
+            x0_mm: s.origin_mm.0,
+            y0_mm: s.origin_mm.1,
+        })
+    }
+
+    pub fn x_mm(&self, j: usize) -> f64 {
+        self.x0_mm + j as f64 * self.dx_mm
+    }
+
+    pub fn y_mm(&self, i: usize) -> f64 {
+        self.y0_mm + i as f64 * self.dy_mm
+    }
+
+    /// Centre of the map (mm): the rotation centre of `registration`.
+    pub fn centre_mm(&self) -> (f64, f64) {
+        (
+            self.x0_mm + 0.5 * (self.cols as f64 - 1.0) * self.dx_mm,
+            self.y0_mm + 0.5 * (self.rows as f64 - 1.0) * self.dy_mm,
+        )
+    }
+}
+
+/// Dwell-like map on the grid extended by (hr, hc): `sum_k w_k` splatted bilinearly at
+/// (x_k, y_k). Samples off the extended grid are dropped (their footprint misses the map).
+pub fn splat(g: &MapGrid, hr: usize, hc: usize, xs: &[f64], ys: &[f64], w: &[f64]) -> Array2<f64> {
+    let (er, ec) = (g.rows + 2 * hr, g.cols + 2 * hc);
+    let mut d = Array2::<f64>::zeros((er, ec));
+    for ((&x, &y), &wk) in xs.iter().zip(ys).zip(w) {
+        if wk == 0.0 {
+            continue;
+        }
+        let fj = (x - g.x0_mm) / g.dx_mm + hc as f64;
+        let fi = (y - g.y0_mm) / g.dy_mm + hr as f64;
+        if !(fi >= 0.0 && fj >= 0.0 && fi < (er - 1) as f64 && fj < (ec - 1) as f64) {
+            continue;
+        }
+        let (i0, j0) = (fi as usize, fj as usize);
+        let (a, b) = (fi - i0 as f64, fj - j0 as f64);
+        d[(i0, j0)] += wk * (1.0 - a) * (1.0 - b);
+        d[(i0, j0 + 1)] += wk * (1.0 - a) * b;
+        d[(i0 + 1, j0)] += wk * a * (1.0 - b);
+        d[(i0 + 1, j0 + 1)] += wk * a * b;
+    }
+    d
+}
+
+/// Bilinear sample of a (hole-free) map at (x, y) mm, positions clamped to the grid.
+pub fn sample(g: &MapGrid, a: &Array2<f64>, x: f64, y: f64) -> f64 {
+    let fj = ((x - g.x0_mm) / g.dx_mm).clamp(0.0, (g.cols - 1) as f64);
+    let fi = ((y - g.y0_mm) / g.dy_mm).clamp(0.0, (g.rows - 1) as f64);
+    let (i0, j0) = (fi as usize, fj as usize);
+    let (i1, j1) = ((i0 + 1).min(g.rows - 1), (j0 + 1).min(g.cols - 1));
+    let (p, q) = (fi - i0 as f64, fj - j0 as f64);
+    (1.0 - p) * ((1.0 - q) * a[(i0, j0)] + q * a[(i0, j1)])
+        + p * ((1.0 - q) * a[(i1, j0)] + q * a[(i1, j1)])
+}
+
+/// Masked (normalised) separable Gaussian smoothing with `sigma_px` pixels; invalid pixels get
+/// the weighted mean of their valid neighbours (0 when there is none within 4 sigma).
+pub fn smooth_masked(a: &Array2<f64>, valid: &Array2<bool>, sigma_px: f64) -> Array2<f64> {
+    let (r, c) = a.dim();
+    let h = (4.0 * sigma_px).ceil().max(1.0) as isize;
+    let w: Vec<f64> = (-h..=h).map(|k| (-(k * k) as f64 / (2.0 * sigma_px * sigma_px)).exp()).collect();
+    let num0 = Array2::from_shape_fn((r, c), |(i, j)| if valid[(i, j)] { a[(i, j)] } else { 0.0 });
+    let den0 = valid.mapv(|v| if v { 1.0 } else { 0.0 });
+    let pass = |m: &Array2<f64>, along_cols: bool| -> Array2<f64> {
+        Array2::from_shape_fn((r, c), |(i, j)| {
+            let mut s = 0.0;
+            for (t, wk) in (-h..=h).zip(&w) {
+                let (ii, jj) = if along_cols { (i as isize, j as isize + t) } else { (i as isize + t, j as isize) };
+                if ii >= 0 && jj >= 0 && (ii as usize) < r && (jj as usize) < c {
+                    s += wk * m[(ii as usize, jj as usize)];
+                }
+            }
+            s
+        })
+    };
+    let num = pass(&pass(&num0, true), false);
+    let den = pass(&pass(&den0, true), false);
+    Array2::from_shape_fn((r, c), |(i, j)| {
+        let d = den[(i, j)];
+        if d > 1e-9 {
+            num[(i, j)] / d
+        } else {
+            0.0
+        }
+    })
+}
+
+/// Squared 1-D distance transform (Felzenszwalb & Huttenlocher) of `f` (0 at sites, inf elsewhere).
+fn dt1(f: &[f64]) -> Vec<f64> {
+    let n = f.len();
+    let mut d = vec![f64::INFINITY; n];
+    let mut v = vec![0usize; n];
+    let mut z = vec![0.0f64; n + 1];
+    let mut k = 0usize;
+    let first = match f.iter().position(|x| x.is_finite()) {
+        Some(p) => p,
+        None => return d,
+    };
+    v[0] = first;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    for q in first + 1..n {
+        if !f[q].is_finite() {
+            continue;
+        }
+        loop {
+            let p = v[k];
+            let s = ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64));
+            if s <= z[k] && k > 0 {
+                k -= 1;
+            } else {
+                k += 1;
+                v[k] = q;
+                z[k] = s;
+                z[k + 1] = f64::INFINITY;
+                break;
+            }
+        }
+    }
+    let mut k = 0;
+    for (q, dq) in d.iter_mut().enumerate() {
+        while z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let p = v[k];
+        *dq = (q as f64 - p as f64).powi(2) + f[p];
+    }
+    d
+}
+
+/// Euclidean distance (mm) from each pixel centre to the nearest pixel where `site` is true.
+fn edt_mm(site: &Array2<bool>, dx: f64, dy: f64) -> Array2<f64> {
+    let (r, c) = site.dim();
+    // Rows in pixel units of x, then columns with the y scale folded in.
+    let mut g = Array2::<f64>::zeros((r, c));
+    for i in 0..r {
+        let f: Vec<f64> = (0..c).map(|j| if site[(i, j)] { 0.0 } else { f64::INFINITY }).collect();
+        let d = dt1(&f);
+        for j in 0..c {
+            g[(i, j)] = d[j] * dx * dx;
+        }
+    }
+    let mut out = Array2::<f64>::zeros((r, c));
+    let sy = dy * dy;
+    for j in 0..c {
+        // Generalised: minimise g(i') + (i - i')^2 dy^2  ==  sy * (g/sy + (i - i')^2)
+        let f: Vec<f64> = (0..r).map(|i| g[(i, j)] / sy).collect();
+        let d = dt1(&f);
+        for i in 0..r {
+            out[(i, j)] = (d[i] * sy).sqrt();
+        }
+    }
+    out
+}
+
+/// Signed distance (mm) to the part edge: positive inside. The part is the valid aperture with
+/// its holes (dropouts not connected to the map border) filled; the map border is an edge.
+pub fn signed_edge_distance(valid: &Array2<bool>, dx: f64, dy: f64) -> Array2<f64> {
+    let (r, c) = valid.dim();
+    // Pad by one outside pixel so the map border counts as edge.
+    let (pr, pc) = (r + 2, c + 2);
+    let mut outside = Array2::<bool>::from_elem((pr, pc), false);
+    // Flood fill from the padding through invalid pixels.
+    let mut stack = vec![(0usize, 0usize)];
+    let is_invalid = |i: usize, j: usize| -> bool {
+        i == 0 || j == 0 || i == pr - 1 || j == pc - 1 || !valid[(i - 1, j - 1)]
+    };
+    outside[(0, 0)] = true;
+    while let Some((i, j)) = stack.pop() {
+        let nb = [(i.wrapping_sub(1), j), (i + 1, j), (i, j.wrapping_sub(1)), (i, j + 1)];
+        for (a, b) in nb {
+            if a < pr && b < pc && !outside[(a, b)] && is_invalid(a, b) {
+                outside[(a, b)] = true;
+                stack.push((a, b));
+            }
+        }
+    }
+    let inside = outside.mapv(|o| !o);
+    let d_out = edt_mm(&outside, dx, dy);
+    let d_in = edt_mm(&inside, dx, dy);
+    let half = 0.5 * dx.min(dy);
+    Array2::from_shape_fn((r, c), |(i, j)| {
+        if inside[(i + 1, j + 1)] {
+            d_out[(i + 1, j + 1)] - half
+        } else {
+            -(d_in[(i + 1, j + 1)] - half)
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn splat_conserves_weight_and_centroid() {
+        let g = MapGrid { rows: 10, cols: 12, dx_mm: 0.5, dy_mm: 0.25, x0_mm: 1.0, y0_mm: -1.0 };
+        let d = splat(&g, 2, 3, &[2.3], &[0.1], &[4.0]);
+        let tot: f64 = d.sum();
+        assert!((tot - 4.0).abs() < 1e-12);
+        let mut cx = 0.0;
+        let mut cy = 0.0;
+        for ((i, j), v) in d.indexed_iter() {
+            cx += v * (1.0 + (j as f64 - 3.0) * 0.5);
+            cy += v * (-1.0 + (i as f64 - 2.0) * 0.25);
+        }
+        assert!((cx / 4.0 - 2.3).abs() < 1e-12 && (cy / 4.0 - 0.1).abs() < 1e-12);
+    }
+
+    #[test]
+    fn edge_distance_of_a_rectangle_with_a_hole() {
+        let mut v = Array2::from_elem((20, 30), true);
+        v[(10, 15)] = false; // a dropout, not an edge
+        let d = signed_edge_distance(&v, 0.5, 0.5);
+        // pixel (10, 5): nearest edge is the left border at x = -0.25 mm -> 5*0.5 + 0.25
+        assert!((d[(10, 5)] - 2.75).abs() < 1e-9, "{}", d[(10, 5)]);
+        assert!((d[(10, 14)] - 4.75).abs() < 1e-9, "{}", d[(10, 14)]);
+        assert!((d[(0, 0)] - 0.25).abs() < 1e-9);
+    }
+
+    #[test]
+    fn smoothing_keeps_a_plane_and_fills_holes() {
+        let a = Array2::from_shape_fn((15, 15), |(i, j)| 2.0 * i as f64 + j as f64);
+        let mut v = Array2::from_elem((15, 15), true);
+        v[(7, 7)] = false;
+        let s = smooth_masked(&a, &v, 1.5);
+        assert!((s[(7, 7)] - 21.0).abs() < 1e-9);
+    }
+}
