@@ -1,0 +1,73 @@
+//! Format detection by content: magic numbers for the binary formats, the signature line for
+//! the Zygo text exports. The extension only chooses the most helpful error when nothing matches
+//! (a `.dat` with a wrong magic number is reported as exactly that).
+
+use std::path::Path;
+
+use crate::error::ParseError;
+use crate::metropro_dat;
+use crate::text::be_u32;
+use crate::zygo_text::ASC_SIGNATURE;
+
+/// The map formats bonnetlab reads (and, for some, writes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum MapFormat {
+    /// MetroPro binary `.dat` (header formats 1, 2, 3).
+    MetroProDat,
+    /// Zygo ASCII export `.asc` (Format 2).
+    MetroProAsc,
+}
+
+impl MapFormat {
+    /// The tag used in `provenance.format` and the CLI's JSON.
+    pub fn tag(self) -> &'static str {
+        match self {
+            MapFormat::MetroProDat => "metropro-dat",
+            MapFormat::MetroProAsc => "metropro-asc",
+        }
+    }
+
+    /// The format an output file name asks for (for writers; readers detect by content).
+    pub fn from_extension(path: &Path) -> Option<MapFormat> {
+        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+        match ext.as_str() {
+            "dat" => Some(MapFormat::MetroProDat),
+            "asc" => Some(MapFormat::MetroProAsc),
+            _ => None,
+        }
+    }
+}
+
+/// Detects the format of a file's bytes; `path` only refines the error message.
+pub fn detect_format(bytes: &[u8], path: &Path) -> Result<MapFormat, ParseError> {
+    if metropro_dat::has_magic(bytes) {
+        return Ok(MapFormat::MetroProDat);
+    }
+    let head = &bytes[..bytes.len().min(256)];
+    let head_text = String::from_utf8_lossy(head);
+    let first = head_text.trim_start_matches('\u{feff}').trim_start();
+    if first.starts_with(ASC_SIGNATURE) {
+        return Ok(MapFormat::MetroProAsc);
+    }
+    if bytes.is_empty() {
+        return Err(ParseError::invalid("the file is empty"));
+    }
+    match MapFormat::from_extension(path) {
+        Some(MapFormat::MetroProDat) => {
+            let magic = be_u32(bytes, 0)
+                .map(|m| format!("{m:#010X}"))
+                .unwrap_or_else(|| format!("{} bytes", bytes.len()));
+            Err(ParseError::field(
+                "magic_number",
+                magic,
+                "is not a MetroPro magic number (0x881B036F, 0x881B0370 or 0x881B0371)",
+            ))
+        }
+        Some(MapFormat::MetroProAsc) => Err(ParseError::invalid(format!(
+            "line 1 is not '{ASC_SIGNATURE} ...'"
+        ))),
+        None => Err(ParseError::invalid(
+            "unrecognised map format (not MetroPro .dat, Zygo ASCII .asc)",
+        )),
+    }
+}

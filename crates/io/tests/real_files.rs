@@ -1,0 +1,256 @@
+//! Golden values (spec zygo-formats.md §7) on the 12 real Zygo files, and the .asc/.dat twins.
+
+mod common;
+
+use bonnetlab_io::read_surface;
+use bonnetlab_surface::Term;
+use common::{assert_rel, pv_rms, real_dir};
+
+struct Golden {
+    file: &'static str,
+    format: &'static str,
+    rows: usize,
+    cols: usize,
+    /// Pixel size in m; 0 = unknown.
+    dx_m: f64,
+    valid: usize,
+    /// PV, RMS after piston; PV, RMS after piston + tilt (nm).
+    stats: [f64; 4],
+}
+
+const GOLDEN: &[Golden] = &[
+    Golden {
+        file: "surfalize_test_1.dat",
+        format: "metropro-dat",
+        rows: 480,
+        cols: 640,
+        dx_m: 1.09825e-06,
+        valid: 307200,
+        stats: [1363.056, 75.2882, 1363.405, 13.3350],
+    },
+    Golden {
+        file: "pyxsurf_05_C1S01.dat",
+        format: "metropro-dat",
+        rows: 480,
+        cols: 640,
+        dx_m: 1.0963e-07,
+        valid: 307200,
+        stats: [347.231, 86.4682, 289.487, 81.1547],
+    },
+    Golden {
+        file: "pyxsurf_05_C1S01.asc",
+        format: "metropro-asc",
+        rows: 480,
+        cols: 640,
+        dx_m: 1.0963e-06,
+        valid: 307200,
+        stats: [347.231, 86.4682, 289.487, 81.1547],
+    },
+    Golden {
+        file: "pyxsurf_07_PCO1.3S04.dat",
+        format: "metropro-dat",
+        rows: 480,
+        cols: 640,
+        dx_m: 1.0963e-07,
+        valid: 307186,
+        stats: [313.293, 80.8952, 307.342, 80.6452],
+    },
+    Golden {
+        file: "pyxsurf_07_PCO1.3S04.asc",
+        format: "metropro-asc",
+        rows: 480,
+        cols: 640,
+        dx_m: 1.0963e-06,
+        valid: 307186,
+        stats: [313.293, 80.8952, 307.342, 80.6452],
+    },
+    Golden {
+        file: "pyxsurf_20191018_01c_flat01_difffiducials.dat",
+        format: "metropro-dat",
+        rows: 345,
+        cols: 346,
+        dx_m: 0.0,
+        valid: 93751,
+        stats: [327.581, 54.9766, 327.581, 54.9766],
+    },
+    Golden {
+        file: "pyxsurf_20191018_01c_flat01_difffiducials.asc",
+        format: "metropro-asc",
+        rows: 345,
+        cols: 346,
+        dx_m: 0.0,
+        valid: 93751,
+        stats: [327.562, 54.9729, 327.561, 54.9729],
+    },
+    Golden {
+        file: "pyxsurf_03_flat04_differenceFiducials_nofid_verovero.dat",
+        format: "metropro-dat",
+        rows: 343,
+        cols: 342,
+        dx_m: 2.51153e-04,
+        valid: 91315,
+        stats: [1238.834, 122.6128, 1238.834, 122.6128],
+    },
+    Golden {
+        file: "pyxsurf_01_801B.dat",
+        format: "metropro-dat",
+        rows: 480,
+        cols: 640,
+        dx_m: 2.45677e-04,
+        valid: 122975,
+        stats: [752.676, 228.5466, 736.725, 227.8523],
+    },
+    Golden {
+        file: "pyxsurf_171212_PCO2_Zygo_data.asc",
+        format: "metropro-asc",
+        rows: 189,
+        cols: 187,
+        dx_m: 6.36653e-04,
+        valid: 22633,
+        stats: [1821.994, 372.2780, 1681.510, 354.8941],
+    },
+    Golden {
+        file: "prysm_valid_zygo_dat_file.dat",
+        format: "metropro-dat",
+        rows: 432,
+        cols: 425,
+        dx_m: 1.17924e-04,
+        valid: 136359,
+        stats: [330.700, 44.5914, 330.700, 44.5914],
+    },
+];
+
+fn check(g: &Golden) {
+    let Some(dir) = real_dir() else { return };
+    let s = read_surface(&dir.join(g.file)).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.provenance.format, g.format, "{}", g.file);
+    assert_eq!(s.dim(), (g.rows, g.cols), "{}", g.file);
+    assert_eq!(s.valid_count(), g.valid, "{}", g.file);
+    if g.dx_m == 0.0 {
+        assert_eq!(
+            (s.dx_mm, s.dy_mm),
+            (None, None),
+            "{}: pixel size 0 must be unknown",
+            g.file
+        );
+    } else {
+        assert_rel(
+            &format!("{} dx", g.file),
+            s.dx_mm.unwrap(),
+            g.dx_m * 1e3,
+            1e-4,
+        );
+        assert_rel(
+            &format!("{} dy", g.file),
+            s.dy_mm.unwrap(),
+            g.dx_m * 1e3,
+            1e-4,
+        );
+    }
+    let (pv, rms) = pv_rms(&s, &[Term::Piston]);
+    let (pv_t, rms_t) = pv_rms(&s, &[Term::Piston, Term::Tilt]);
+    for (what, got, want) in [
+        ("PV piston", pv, g.stats[0]),
+        ("RMS piston", rms, g.stats[1]),
+        ("PV plane", pv_t, g.stats[2]),
+        ("RMS plane", rms_t, g.stats[3]),
+    ] {
+        assert_rel(&format!("{} {what}", g.file), got, want, 1e-4);
+    }
+}
+
+#[test]
+fn every_real_zygo_file_matches_its_golden_values() {
+    let mut seen = 0;
+    for g in GOLDEN {
+        check(g);
+        seen += 1;
+    }
+    assert_eq!(seen, GOLDEN.len());
+}
+
+#[test]
+fn provenance_of_a_newview_dat() {
+    let Some(dir) = real_dir() else { return };
+    let s = read_surface(&dir.join("surfalize_test_1.dat")).unwrap();
+    let p = &s.provenance;
+    assert_eq!(p.wavelength_m.map(|w| (w * 1e9).round()), Some(570.0));
+    assert!(p.objective.as_deref().unwrap().contains("20X"), "{p:?}");
+    assert!(
+        p.software.as_deref().unwrap().starts_with("MetroPro 8.1.5"),
+        "{p:?}"
+    );
+    assert!(
+        p.instrument.as_deref().unwrap().contains("sys_type 22"),
+        "{p:?}"
+    );
+    assert!(p
+        .source_path
+        .as_deref()
+        .unwrap()
+        .ends_with("surfalize_test_1.dat"));
+    let s = read_surface(&dir.join("pyxsurf_05_C1S01.dat")).unwrap();
+    // The full serial (i32 LE @798) and the measurement time stamp (2018, per the .asc twin).
+    assert!(s
+        .provenance
+        .instrument
+        .as_deref()
+        .unwrap()
+        .ends_with("serial 63026"));
+    assert!(s
+        .provenance
+        .date
+        .as_deref()
+        .unwrap()
+        .starts_with("2018-03-30"));
+    let s = read_surface(&dir.join("pyxsurf_07_PCO1.3S04.asc")).unwrap();
+    assert!(s
+        .provenance
+        .comment
+        .as_deref()
+        .unwrap()
+        .contains("PCO1.3S04"));
+}
+
+/// Each .asc equals its .dat twin within one count, with the same mask.
+#[test]
+fn asc_equals_its_dat_twin_within_one_count() {
+    let Some(dir) = real_dir() else { return };
+    for stem in [
+        "pyxsurf_05_C1S01",
+        "pyxsurf_07_PCO1.3S04",
+        "pyxsurf_20191018_01c_flat01_difffiducials",
+    ] {
+        let d = read_surface(&dir.join(format!("{stem}.dat"))).unwrap();
+        let a = read_surface(&dir.join(format!("{stem}.asc"))).unwrap();
+        assert_eq!(d.dim(), a.dim(), "{stem}");
+        assert_eq!(d.valid(), a.valid(), "{stem}: masks differ");
+        let w = d.provenance.wavelength_m.unwrap();
+        let count_nm = w * 0.5 / 32768.0 * 1e9;
+        let mut worst = 0.0f64;
+        let mut n_diff = 0;
+        let mut worst_rel = 0.0f64;
+        for (x, y) in d.heights_nm().iter().zip(a.heights_nm()) {
+            worst = worst.max((x - y).abs());
+            // The .dat stores W as f32, the .asc prints it in decimal: 1e-7 relative apart.
+            let rel = (x - y).abs() / x.abs().max(y.abs()).max(1e-300);
+            if rel > 1e-6 {
+                n_diff += 1;
+                worst_rel = worst_rel.max(rel);
+            }
+        }
+        assert!(
+            worst <= count_nm * 1.000_01,
+            "{stem}: max difference {worst} nm > one count {count_nm} nm"
+        );
+        if stem.contains("2019") {
+            // The Mx double export rounds separately (spec §3.2): many ±1 differences.
+            assert!(n_diff > 1000, "{stem}: {n_diff}");
+        } else {
+            assert_eq!(
+                n_diff, 0,
+                "{stem}: MetroPro twins are identical in counts (worst {worst_rel:.1e})"
+            );
+        }
+    }
+}
