@@ -1,0 +1,31 @@
+//! Errors of the vibration model and its coupling into removal.
+
+use thiserror::Error;
+
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum VibrationError {
+    /// A `[vibration]` key whose value is out of its domain or of the wrong type.
+    #[error("[vibration] {key}: {what}")]
+    InvalidParam { key: String, what: String },
+    /// A key the `[vibration]` table does not know (usually a typo).
+    #[error("[vibration] unknown key '{0}'")]
+    UnknownKey(String),
+    /// Two keys that cannot be given together.
+    #[error("[vibration] '{0}' and '{1}' cannot both be given")]
+    Conflict(String, String),
+    /// A bad argument to a library function (empty path, zero sampling rate, ...).
+    #[error("invalid argument: {0}")]
+    InvalidArgument(String),
+    /// A failure inside the process simulator the coupling builds on.
+    #[error("process: {0}")]
+    Process(String),
+}
+
+impl VibrationError {
+    pub(crate) fn param(key: &str, what: impl Into<String>) -> Self {
+        VibrationError::InvalidParam {
+            key: key.to_string(),
+            what: what.into(),
+        }
+    }
+}
