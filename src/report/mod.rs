@@ -1,2 +1,7 @@
 //! Rendering result structs for people (HTML with inline plots) and pipelines (JSON, CSV).
 //! Nothing outside this module formats text for people.
+
+pub mod font;
+pub mod html;
+pub mod maps;
+pub mod plot;
