@@ -1,2 +1,33 @@
 //! Power spectral densities of surface maps (1-D along X and Y, 2-D, radial), band-limited RMS
 //! and the ripple check at the raster's grating spacing. Conventions: `shared/spec/metrology.md`.
+//!
+//! Every PSD says its sidedness: `Psd1d` is ONE-SIDED (nm^2 mm), `Psd2d` is TWO-SIDED
+//! (nm^2 mm^2), the radial forms are labelled (`integrated_nm2_mm`, `average_nm2_mm2`).
+//! Frequencies are in cycles/mm; angular frequencies only appear in `convert`.
+//!
+//! Pipeline: global form removal (`PsdOptions::remove`, joint fit from bonnetlab_surface) ->
+//! per-line segments with short gaps interpolated -> per-segment detrend, window, zero-padded
+//! real FFT -> valid-count weighted average. FFT plans are shared and buffers reused per rayon
+//! job; results do not depend on the thread count.
+
+pub mod band;
+pub mod convert;
+pub mod error;
+pub mod limit;
+mod lines;
+pub mod psd1d;
+pub mod psd2d;
+pub mod ripple;
+pub mod window;
+
+pub use band::{band, band_power, band_rms, BandRms, MSF_DEFAULT_PER_MM};
+pub use convert::{to_gwyddion_w1, to_surfacetopography_c1d, ConvertedPsd};
+pub use error::SpectrumError;
+pub use limit::{check_limit, LimitCheck, LimitLine};
+pub use lines::{Axis, Detrend};
+pub use psd1d::{band_rms_profile, line_psd, psd_x, psd_xy, psd_y, Psd1d, PsdOptions};
+pub use psd2d::{psd_2d, Psd2d, RadialPsd};
+pub use ripple::{
+    ripple, ripple_from_psds, Harmonic, Ripple, RippleOptions, PROMINENCE_THRESHOLD_DB,
+};
+pub use window::Window;

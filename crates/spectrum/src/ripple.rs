@@ -1,0 +1,183 @@
+//! The ripple check at the raster's grating spacing p (f0 = 1/p), read in the Y PSD (the feed
+//! direction, across the raster tracks).
+//!
+//! - sigma_k = band RMS over |f - k f0| <= h with h = max(4 df, 0.1 f0), k = 1..=K (harmonics
+//!   whose band centre lies below Nyquist); sigma_total = sqrt(sum sigma_k^2).
+//! - A_eq = sqrt(2) sigma_1, PV_eq = 2 sqrt(2) sigma_1 (never read amplitudes off peak heights:
+//!   the peak scales with 1 / ENBW).
+//! - Prominence (dB) = 10 log10(peak / background), peak = largest PSD value in the f0 band,
+//!   background = median of the PSD in the flanking windows h < |f - f0| <= h + max(2h, 8 df),
+//!   leaving out biased bins and every harmonic band. The median ignores a flank's own peaks.
+//! - `detected` = prominence >= threshold (default 6 dB). On a ripple-free map averaged over
+//!   many lines (>= 64) the prominence of noise is about 1 dB; with very few lines the PSD
+//!   estimate itself fluctuates by several dB, so raise the threshold for those.
+//! - y_over_x = sigma_1 from the Y PSD / band RMS of the X PSD over the same band (anisotropy).
+
+use serde::Serialize;
+
+use bonnetlab_surface::Surface;
+
+use crate::band::band_rms;
+use crate::error::SpectrumError;
+use crate::psd1d::{psd_xy, Psd1d, PsdOptions};
+
+/// Default detection threshold on the prominence, dB.
+pub const PROMINENCE_THRESHOLD_DB: f64 = 6.0;
+
+/// Options of the ripple check.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RippleOptions {
+    /// Highest harmonic considered (default 5); harmonics above Nyquist are skipped.
+    pub harmonics: usize,
+    /// Prominence at or above which a ripple is reported as detected, dB.
+    pub prominence_threshold_db: f64,
+}
+
+impl Default for RippleOptions {
+    fn default() -> Self {
+        RippleOptions {
+            harmonics: 5,
+            prominence_threshold_db: PROMINENCE_THRESHOLD_DB,
+        }
+    }
+}
+
+/// One harmonic of the ripple.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Harmonic {
+    pub k: usize,
+    pub freq_per_mm: f64,
+    pub sigma_nm: f64,
+}
+
+/// Ripple metrics (field names as in shared/spec/interfaces.md `ripple`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Ripple {
+    pub pitch_mm: f64,
+    pub f0_per_mm: f64,
+    /// Half-width h of every harmonic band, mm^-1.
+    pub band_halfwidth_per_mm: f64,
+    pub sigma1_nm: f64,
+    pub sigma_total_nm: f64,
+    pub a_eq_nm: f64,
+    pub pv_eq_nm: f64,
+    pub prominence_db: f64,
+    pub peak_nm2_mm: f64,
+    pub background_nm2_mm: f64,
+    pub prominence_threshold_db: f64,
+    pub detected: bool,
+    /// sigma_1 (Y) / band RMS of the X PSD over the same band; null when X has no power there.
+    pub y_over_x: Option<f64>,
+    pub sigma1_x_nm: f64,
+    /// The f0 band reaches into the biased lowest bins (too few periods on the map).
+    pub biased: bool,
+    pub harmonics: Vec<Harmonic>,
+}
+
+/// Ripple from an existing pair of one-sided PSDs (X and Y).
+pub fn ripple_from_psds(
+    x: &Psd1d,
+    y: &Psd1d,
+    pitch_mm: f64,
+    ropts: &RippleOptions,
+) -> Result<Ripple, SpectrumError> {
+    if !(pitch_mm.is_finite() && pitch_mm > 0.0) {
+        return Err(SpectrumError::InvalidArgument(format!(
+            "pitch must be positive, got {pitch_mm} mm"
+        )));
+    }
+    let f0 = 1.0 / pitch_mm;
+    let df = y.df_per_mm;
+    let nyq = y.freq_per_mm.last().copied().unwrap_or(0.0);
+    if f0 > nyq {
+        return Err(SpectrumError::InvalidArgument(format!(
+            "grating frequency 1/{pitch_mm} mm = {f0} mm^-1 is above the Y Nyquist frequency {nyq} mm^-1"
+        )));
+    }
+    let h = (4.0 * df).max(0.1 * f0);
+    let harmonics: Vec<Harmonic> = (1..=ropts.harmonics.max(1))
+        .map(|k| k as f64 * f0)
+        .take_while(|&fk| fk <= nyq)
+        .enumerate()
+        .map(|(i, fk)| Harmonic {
+            k: i + 1,
+            freq_per_mm: fk,
+            sigma_nm: band_rms(y, fk - h, fk + h),
+        })
+        .collect();
+    let sigma1 = harmonics[0].sigma_nm;
+    let sigma_total = harmonics
+        .iter()
+        .map(|m| m.sigma_nm * m.sigma_nm)
+        .sum::<f64>()
+        .sqrt();
+
+    let eps = 1e-9 * df;
+    let in_band = |f: f64, c: f64| (f - c).abs() <= h + eps;
+    let peak = y
+        .freq_per_mm
+        .iter()
+        .zip(&y.psd_nm2_mm)
+        .filter(|(f, _)| in_band(**f, f0))
+        .map(|(_, p)| *p)
+        .fold(0.0, f64::max);
+    let flank = (2.0 * h).max(8.0 * df);
+    let f_lo = y.first_unbiased_freq_per_mm();
+    let mut bg: Vec<f64> = y
+        .freq_per_mm
+        .iter()
+        .zip(&y.psd_nm2_mm)
+        .filter(|(f, _)| {
+            let d = (**f - f0).abs();
+            d > h + eps
+                && d <= h + flank + eps
+                && **f >= f_lo - eps
+                && !(2..=ropts.harmonics.max(2)).any(|k| in_band(**f, k as f64 * f0))
+        })
+        .map(|(_, p)| *p)
+        .collect();
+    if bg.is_empty() {
+        return Err(SpectrumError::TooSmall(format!(
+            "no PSD bins flank the grating band around {f0} mm^-1 to estimate a background"
+        )));
+    }
+    bg.sort_by(f64::total_cmp);
+    let mid = bg.len() / 2;
+    let background = if bg.len() % 2 == 1 {
+        bg[mid]
+    } else {
+        0.5 * (bg[mid - 1] + bg[mid])
+    };
+    let prominence_db = if background > 0.0 && peak > 0.0 {
+        10.0 * (peak / background).log10()
+    } else if peak > 0.0 {
+        f64::MAX.log10() * 10.0 // a peak over an exactly zero background (noise-free data)
+    } else {
+        0.0
+    };
+    let sigma1_x = band_rms(x, f0 - h, f0 + h);
+    Ok(Ripple {
+        pitch_mm,
+        f0_per_mm: f0,
+        band_halfwidth_per_mm: h,
+        sigma1_nm: sigma1,
+        sigma_total_nm: sigma_total,
+        a_eq_nm: std::f64::consts::SQRT_2 * sigma1,
+        pv_eq_nm: 2.0 * std::f64::consts::SQRT_2 * sigma1,
+        prominence_db,
+        peak_nm2_mm: peak,
+        background_nm2_mm: background,
+        prominence_threshold_db: ropts.prominence_threshold_db,
+        detected: prominence_db >= ropts.prominence_threshold_db,
+        y_over_x: (sigma1_x > 0.0).then(|| sigma1 / sigma1_x),
+        sigma1_x_nm: sigma1_x,
+        biased: f0 - h < f_lo,
+        harmonics,
+    })
+}
+
+/// Ripple of a map: both PSDs (one form removal) then `ripple_from_psds` with default options.
+pub fn ripple(s: &Surface, pitch_mm: f64, opts: &PsdOptions) -> Result<Ripple, SpectrumError> {
+    let (x, y) = psd_xy(s, opts)?;
+    ripple_from_psds(&x, &y, pitch_mm, &RippleOptions::default())
+}
