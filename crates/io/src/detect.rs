@@ -5,9 +5,9 @@
 use std::path::Path;
 
 use crate::error::ParseError;
-use crate::metropro_dat;
 use crate::text::be_u32;
 use crate::zygo_text::ASC_SIGNATURE;
+use crate::{datx, metropro_dat};
 
 /// The map formats bonnetlab reads (and, for some, writes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -16,6 +16,8 @@ pub enum MapFormat {
     MetroProDat,
     /// Zygo ASCII export `.asc` (Format 2).
     MetroProAsc,
+    /// Mx `.datx` (HDF5).
+    Datx,
 }
 
 impl MapFormat {
@@ -24,6 +26,7 @@ impl MapFormat {
         match self {
             MapFormat::MetroProDat => "metropro-dat",
             MapFormat::MetroProAsc => "metropro-asc",
+            MapFormat::Datx => "datx",
         }
     }
 
@@ -33,6 +36,7 @@ impl MapFormat {
         match ext.as_str() {
             "dat" => Some(MapFormat::MetroProDat),
             "asc" => Some(MapFormat::MetroProAsc),
+            "datx" => Some(MapFormat::Datx),
             _ => None,
         }
     }
@@ -42,6 +46,9 @@ impl MapFormat {
 pub fn detect_format(bytes: &[u8], path: &Path) -> Result<MapFormat, ParseError> {
     if metropro_dat::has_magic(bytes) {
         return Ok(MapFormat::MetroProDat);
+    }
+    if datx::has_magic(bytes) {
+        return Ok(MapFormat::Datx);
     }
     let head = &bytes[..bytes.len().min(256)];
     let head_text = String::from_utf8_lossy(head);
@@ -66,8 +73,11 @@ pub fn detect_format(bytes: &[u8], path: &Path) -> Result<MapFormat, ParseError>
         Some(MapFormat::MetroProAsc) => Err(ParseError::invalid(format!(
             "line 1 is not '{ASC_SIGNATURE} ...'"
         ))),
+        Some(MapFormat::Datx) => Err(ParseError::invalid(
+            "not an HDF5 file (no HDF5 signature at byte 0): not a .datx",
+        )),
         None => Err(ParseError::invalid(
-            "unrecognised map format (not MetroPro .dat, Zygo ASCII .asc)",
+            "unrecognised map format (not MetroPro .dat, Mx .datx, Zygo ASCII .asc)",
         )),
     }
 }

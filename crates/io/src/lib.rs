@@ -7,6 +7,7 @@
 //! CLI contract). Errors name the file and the field; none of the readers panics or allocates
 //! more than the file's size implies.
 
+pub mod datx;
 pub mod detect;
 pub mod error;
 pub mod metropro_asc;
@@ -36,5 +37,6 @@ pub fn parse_bytes(bytes: &[u8], fmt: MapFormat) -> Result<Surface, ParseError> 
     match fmt {
         MapFormat::MetroProDat => metropro_dat::parse(bytes),
         MapFormat::MetroProAsc => metropro_asc::parse(bytes),
+        MapFormat::Datx => datx::parse(bytes),
     }
 }

@@ -118,6 +118,15 @@ const GOLDEN: &[Golden] = &[
         valid: 136359,
         stats: [330.700, 44.5914, 330.700, 44.5914],
     },
+    Golden {
+        file: "monolithic_zygo_test.datx",
+        format: "datx",
+        rows: 259,
+        cols: 33,
+        dx_m: 1.0e-03,
+        valid: 7771,
+        stats: [453.030, 80.8177, 457.569, 80.1964],
+    },
 ];
 
 fn check(g: &Golden) {
@@ -203,6 +212,14 @@ fn provenance_of_a_newview_dat() {
         .as_deref()
         .unwrap()
         .starts_with("2018-03-30"));
+    let s = read_surface(&dir.join("monolithic_zygo_test.datx")).unwrap();
+    let p = &s.provenance;
+    assert_eq!(p.instrument.as_deref(), Some("Zygo GPI, serial 651365"));
+    assert_eq!(p.software.as_deref(), Some("MetroPro 8.3.3"));
+    assert_eq!(p.objective.as_deref(), Some("Sm Aperture"));
+    // Coordinates {RowStart 22, ColumnStart 15} at 1 mm/pixel.
+    assert_eq!(s.origin_mm, (15.0, 22.0));
+    assert!((p.wavelength_m.unwrap() - 632.8e-9).abs() < 1e-12, "{p:?}");
     let s = read_surface(&dir.join("pyxsurf_07_PCO1.3S04.asc")).unwrap();
     assert!(s
         .provenance
