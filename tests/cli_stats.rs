@@ -1,0 +1,210 @@
+//! `bonnetlab stats` end to end: the built binary on the 12 real Zygo files against the golden
+//! values of shared/spec/zygo-formats.md section 7, and exit codes plus one-line errors that
+//! name the file for malformed inputs built in a temporary directory.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn real(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/real")
+        .join(name)
+}
+
+fn stats(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
+        .arg("stats")
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+fn json(file: &Path, remove: &str) -> serde_json::Value {
+    let out = stats(&[file.to_str().unwrap(), "--remove", remove, "--json"]);
+    assert!(
+        out.status.success(),
+        "{}: {}",
+        file.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("stdout is one JSON object")
+}
+
+/// (file, format, rows, cols, dx [m] or 0 for unknown, valid, PV piston, RMS piston,
+/// PV plane, RMS plane): spec/zygo-formats.md section 7.
+#[rustfmt::skip]
+const GOLDEN: [(&str, &str, usize, usize, f64, usize, f64, f64, f64, f64); 12] = [
+    ("surfalize_test_1.dat", "metropro-dat", 480, 640, 1.09825e-06, 307200, 1363.056, 75.2882, 1363.405, 13.3350),
+    ("pyxsurf_05_C1S01.dat", "metropro-dat", 480, 640, 1.0963e-07, 307200, 347.231, 86.4682, 289.487, 81.1547),
+    ("pyxsurf_05_C1S01.asc", "metropro-asc", 480, 640, 1.0963e-06, 307200, 347.231, 86.4682, 289.487, 81.1547),
+    ("pyxsurf_07_PCO1.3S04.dat", "metropro-dat", 480, 640, 1.0963e-07, 307186, 313.293, 80.8952, 307.342, 80.6452),
+    ("pyxsurf_07_PCO1.3S04.asc", "metropro-asc", 480, 640, 1.0963e-06, 307186, 313.293, 80.8952, 307.342, 80.6452),
+    ("pyxsurf_20191018_01c_flat01_difffiducials.dat", "metropro-dat", 345, 346, 0.0, 93751, 327.581, 54.9766, 327.581, 54.9766),
+    ("pyxsurf_20191018_01c_flat01_difffiducials.asc", "metropro-asc", 345, 346, 0.0, 93751, 327.562, 54.9729, 327.561, 54.9729),
+    ("pyxsurf_03_flat04_differenceFiducials_nofid_verovero.dat", "metropro-dat", 343, 342, 2.51153e-04, 91315, 1238.834, 122.6128, 1238.834, 122.6128),
+    ("pyxsurf_01_801B.dat", "metropro-dat", 480, 640, 2.45677e-04, 122975, 752.676, 228.5466, 736.725, 227.8523),
+    ("pyxsurf_171212_PCO2_Zygo_data.asc", "metropro-asc", 189, 187, 6.36653e-04, 22633, 1821.994, 372.2780, 1681.510, 354.8941),
+    ("prysm_valid_zygo_dat_file.dat", "metropro-dat", 432, 425, 1.17924e-04, 136359, 330.700, 44.5914, 330.700, 44.5914),
+    ("monolithic_zygo_test.datx", "datx", 259, 33, 1.0e-03, 7771, 453.030, 80.8177, 457.569, 80.1964),
+];
+
+fn close(got: f64, want: f64, rel: f64) -> bool {
+    (got - want).abs() <= rel * want.abs()
+}
+
+#[test]
+fn real_files_match_golden_values() {
+    for &(name, format, rows, cols, dx_m, valid, pv_p, rms_p, pv_t, rms_t) in &GOLDEN {
+        let file = real(name);
+        let j = json(&file, "piston");
+        assert_eq!(j["format"], format, "{name}");
+        assert_eq!(j["rows"], rows, "{name}");
+        assert_eq!(j["cols"], cols, "{name}");
+        assert_eq!(j["valid"], valid, "{name}");
+        assert_eq!(j["removed"], serde_json::json!(["piston"]), "{name}");
+        if dx_m == 0.0 {
+            assert!(
+                j["dx_mm"].is_null() && j["dy_mm"].is_null(),
+                "{name}: unknown pixel size"
+            );
+        } else {
+            let dx = j["dx_mm"].as_f64().expect("dx_mm");
+            // Golden dx values are printed to 5-6 significant digits.
+            assert!(close(dx, dx_m * 1e3, 5e-5), "{name}: dx {dx} mm");
+        }
+        // Golden PV values have 3 decimals: 1e-4 relative or half a unit in the last place.
+        let tol = |v: f64, digits: f64| (1e-4 * v).max(0.5 * digits);
+        let pv = j["pv_nm"].as_f64().unwrap();
+        let rms = j["rms_nm"].as_f64().unwrap();
+        assert!(
+            (pv - pv_p).abs() <= tol(pv_p, 1e-3),
+            "{name}: PV piston {pv} vs {pv_p}"
+        );
+        assert!(
+            (rms - rms_p).abs() <= tol(rms_p, 1e-4),
+            "{name}: RMS piston {rms} vs {rms_p}"
+        );
+        for key in ["sa_nm", "ssk", "sku", "sp_nm", "sv_nm"] {
+            assert!(j[key].as_f64().is_some_and(f64::is_finite), "{name}: {key}");
+        }
+        let j = json(&file, "piston,tilt");
+        assert_eq!(j["removed"], serde_json::json!(["piston", "tilt"]));
+        let pv = j["pv_nm"].as_f64().unwrap();
+        let rms = j["rms_nm"].as_f64().unwrap();
+        assert!(
+            (pv - pv_t).abs() <= tol(pv_t, 1e-3),
+            "{name}: PV plane {pv} vs {pv_t}"
+        );
+        assert!(
+            (rms - rms_t).abs() <= tol(rms_t, 1e-4),
+            "{name}: RMS plane {rms} vs {rms_t}"
+        );
+    }
+}
+
+#[test]
+fn table_output_and_higher_order_terms() {
+    let file = real("prysm_valid_zygo_dat_file.dat");
+    let out = stats(&[file.to_str().unwrap(), "--remove", "piston,tilt,power"]);
+    assert!(out.status.success());
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("removed   piston, tilt, power"), "{text}");
+    assert!(text.contains("RMS (Sq)"));
+    // More terms can only lower the RMS: each set's span contains the previous one.
+    let mut last = f64::INFINITY;
+    for terms in ["piston", "piston,tilt,power", "zernike9", "zernike37"] {
+        let rms = json(&file, terms)["rms_nm"].as_f64().unwrap();
+        assert!(rms <= last + 1e-9, "{terms}: {rms} > {last}");
+        last = rms;
+    }
+    let out = stats(&[
+        file.to_str().unwrap(),
+        "--remove",
+        "legendre3",
+        "--pvr",
+        "--json",
+    ]);
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let pvr = j["pvr_nm"].as_f64().unwrap();
+    assert!(pvr > 0.0 && j["pvr_set"].as_str().unwrap().contains("Z1-Z37"));
+}
+
+/// Runs stats on `file` and checks the exit code and a one-line stderr naming the file.
+fn expect_error(file: &Path, extra: &[&str], code: i32, needle: &str) {
+    let mut args = vec![file.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let out = stats(&args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(code), "{}: {err}", file.display());
+    assert!(out.stdout.is_empty(), "no partial output");
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+    let name = file.file_name().unwrap().to_str().unwrap();
+    assert!(err.contains(name), "names the file: {err}");
+    assert!(
+        err.to_lowercase().contains(needle),
+        "mentions '{needle}': {err}"
+    );
+}
+
+fn set_u16(b: &mut [u8], off: usize, v: u16) {
+    b[off..off + 2].copy_from_slice(&v.to_be_bytes());
+}
+
+fn set_u32(b: &mut [u8], off: usize, v: u32) {
+    b[off..off + 4].copy_from_slice(&v.to_be_bytes());
+}
+
+#[test]
+fn malformed_inputs_give_exit_codes_and_one_line_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, bytes: &[u8]| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    // A small format-1 file without intensity: header 834, phase 345 x 346.
+    let good = std::fs::read(real("pyxsurf_20191018_01c_flat01_difffiducials.dat")).unwrap();
+
+    expect_error(&write("empty.dat", b""), &[], 2, "");
+    expect_error(
+        &write("words.dat", b"this is not a map at all\n"),
+        &[],
+        2,
+        "",
+    );
+    expect_error(&write("truncated.dat", &good[..2000]), &[], 2, "");
+    let mut b = good.clone();
+    set_u16(&mut b, 68, 347); // cn_width no longer matches cn_n_bytes nor the file size
+    expect_error(&write("width.dat", &b), &[], 2, "cn_");
+    let mut b = good.clone();
+    set_u16(&mut b, 68, 60000);
+    set_u16(&mut b, 70, 60000);
+    set_u32(&mut b, 72, 60000u32.wrapping_mul(60000).wrapping_mul(4)); // wraps: inconsistent anyway
+    expect_error(&write("huge.dat", &b), &[], 2, "");
+    let mut b = good.clone();
+    set_u16(&mut b, 68, 0);
+    set_u16(&mut b, 70, 0);
+    set_u32(&mut b, 72, 0);
+    expect_error(&write("zero.dat", &b[..834]), &[], 2, "");
+    let mut b = good.clone();
+    set_u16(&mut b, 218, 7);
+    expect_error(&write("phase_res.dat", &b), &[], 2, "phase_res");
+    // Well-formed but every phase value is the no-data marker: valid but unusable, exit 1.
+    let mut b = good.clone();
+    for chunk in b[834..].chunks_exact_mut(4) {
+        chunk.copy_from_slice(&0x7FFF_FFF8u32.to_be_bytes());
+    }
+    expect_error(&write("nodata.dat", &b), &[], 1, "no valid pixel");
+    // Short ASCII export: the header only.
+    let asc = std::fs::read(real("pyxsurf_171212_PCO2_Zygo_data.asc")).unwrap();
+    expect_error(&write("short.asc", &asc[..600]), &[], 2, "");
+    expect_error(&dir.path().join("missing.dat"), &[], 2, "");
+    // A bad term list is a usage error (the binary parses it before reading the file).
+    let out = stats(&[
+        real("prysm_valid_zygo_dat_file.dat").to_str().unwrap(),
+        "--remove",
+        "coma",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("coma"));
+}
