@@ -10,6 +10,7 @@
 pub mod background;
 pub mod centre;
 pub mod error;
+pub mod fit;
 pub mod generate;
 mod linalg;
 pub mod metrics;
@@ -18,6 +19,7 @@ pub mod profile;
 
 pub use background::MapKind;
 pub use error::SpotsError;
+pub use fit::{fit_model, FitStart, ModelFit, Observation};
 pub use generate::{generate_spot, SpotSpec};
 pub use metrics::{measure_spot, SpotAnalysis, SpotMetrics, SpotOptions};
 pub use model::{BonnetModel, Factor, Factors, ModelMetrics};
