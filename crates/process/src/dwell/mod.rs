@@ -1,0 +1,1 @@
+//! Dwell-time solvers (in progress).

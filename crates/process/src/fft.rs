@@ -1,0 +1,380 @@
+//! Real 2-D FFTs and linear convolution by zero-padded FFT, with plans, kernel spectra and
+//! scratch buffers kept in a reusable workspace (fresh buffers cost more than the FFT itself).
+//!
+//! Layout: real arrays are `n0 x n1` row-major. The half spectrum is stored *transposed*,
+//! `(n1/2 + 1) x n0`, so the column transforms run on contiguous memory; callers only multiply
+//! spectra pointwise, so the layout never leaks. Inverse transforms are normalised (1/(n0 n1)).
+
+use std::sync::Arc;
+
+use ndarray::{Array2, ArrayView2};
+use rayon::prelude::*;
+use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
+use rustfft::num_complex::Complex;
+use rustfft::{Fft, FftPlanner};
+
+/// Smallest n' >= n whose only prime factors are 2, 3, 5 and 7 (fast FFT sizes).
+pub fn fast_len(n: usize) -> usize {
+    let mut m = n.max(1);
+    loop {
+        let mut k = m;
+        for p in [2, 3, 5, 7] {
+            while k.is_multiple_of(p) {
+                k /= p;
+            }
+        }
+        if k == 1 {
+            return m;
+        }
+        m += 1;
+    }
+}
+
+/// A real 2-D FFT of fixed size with its plans.
+pub struct Fft2 {
+    n0: usize,
+    n1: usize,
+    nh: usize,
+    r2c: Arc<dyn RealToComplex<f64>>,
+    c2r: Arc<dyn ComplexToReal<f64>>,
+    col_fwd: Arc<dyn Fft<f64>>,
+    col_inv: Arc<dyn Fft<f64>>,
+}
+
+impl std::fmt::Debug for Fft2 {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Fft2({} x {})", self.n0, self.n1)
+    }
+}
+
+const PAR_ROWS: usize = 16;
+
+impl Fft2 {
+    pub fn new(n0: usize, n1: usize) -> Fft2 {
+        let n0 = n0.max(1);
+        let n1 = n1.max(1);
+        let mut rp = RealFftPlanner::<f64>::new();
+        let mut cp = FftPlanner::<f64>::new();
+        Fft2 {
+            n0,
+            n1,
+            nh: n1 / 2 + 1,
+            r2c: rp.plan_fft_forward(n1),
+            c2r: rp.plan_fft_inverse(n1),
+            col_fwd: cp.plan_fft_forward(n0),
+            col_inv: cp.plan_fft_inverse(n0),
+        }
+    }
+
+    pub fn shape(&self) -> (usize, usize) {
+        (self.n0, self.n1)
+    }
+
+    /// Length of a (transposed) half spectrum.
+    pub fn spectrum_len(&self) -> usize {
+        self.nh * self.n0
+    }
+
+    /// Forward transform of `real` (`n0 * n1`, destroyed) into `spec` (transposed half
+    /// spectrum); `tmp` is scratch of `spectrum_len()`.
+    pub fn forward(&self, real: &mut [f64], tmp: &mut [Complex<f64>], spec: &mut [Complex<f64>]) {
+        let (n1, nh) = (self.n1, self.nh);
+        real.par_chunks_mut(n1 * PAR_ROWS)
+            .zip(tmp.par_chunks_mut(nh * PAR_ROWS))
+            .for_each(|(rin, cout)| {
+                let mut scratch = self.r2c.make_scratch_vec();
+                for (r, c) in rin.chunks_mut(n1).zip(cout.chunks_mut(nh)) {
+                    // Lengths match by construction, so the only error case cannot occur.
+                    let _ = self.r2c.process_with_scratch(r, c, &mut scratch);
+                }
+            });
+        transpose(tmp, spec, self.n0, nh);
+        let n0 = self.n0;
+        spec.par_chunks_mut(n0 * PAR_ROWS).for_each(|chunk| {
+            let mut scratch = vec![Complex::new(0.0, 0.0); self.col_fwd.get_inplace_scratch_len()];
+            self.col_fwd.process_with_scratch(chunk, &mut scratch);
+        });
+    }
+
+    /// Inverse transform of `spec` (destroyed) into `real`, normalised.
+    pub fn inverse(&self, spec: &mut [Complex<f64>], tmp: &mut [Complex<f64>], real: &mut [f64]) {
+        let (n0, n1, nh) = (self.n0, self.n1, self.nh);
+        spec.par_chunks_mut(n0 * PAR_ROWS).for_each(|chunk| {
+            let mut scratch = vec![Complex::new(0.0, 0.0); self.col_inv.get_inplace_scratch_len()];
+            self.col_inv.process_with_scratch(chunk, &mut scratch);
+        });
+        transpose(spec, tmp, nh, n0);
+        let norm = 1.0 / (n0 * n1) as f64;
+        tmp.par_chunks_mut(nh * PAR_ROWS)
+            .zip(real.par_chunks_mut(n1 * PAR_ROWS))
+            .for_each(|(cin, rout)| {
+                let mut scratch = self.c2r.make_scratch_vec();
+                for (c, r) in cin.chunks_mut(nh).zip(rout.chunks_mut(n1)) {
+                    c[0].im = 0.0;
+                    if n1 % 2 == 0 {
+                        c[nh - 1].im = 0.0;
+                    }
+                    let _ = self.c2r.process_with_scratch(c, r, &mut scratch);
+                    r.iter_mut().for_each(|v| *v *= norm);
+                }
+            });
+    }
+}
+
+/// Blocked transpose of an `rows x cols` row-major matrix into `cols x rows`.
+fn transpose(src: &[Complex<f64>], dst: &mut [Complex<f64>], rows: usize, cols: usize) {
+    const B: usize = 32;
+    dst.par_chunks_mut(rows * B)
+        .enumerate()
+        .for_each(|(cb, dchunk)| {
+            let c0 = cb * B;
+            let c1 = (c0 + B).min(cols);
+            for r0 in (0..rows).step_by(B) {
+                let r1 = (r0 + B).min(rows);
+                for c in c0..c1 {
+                    let drow = &mut dchunk[(c - c0) * rows..(c - c0 + 1) * rows];
+                    for r in r0..r1 {
+                        drow[r] = src[r * cols + c];
+                    }
+                }
+            }
+        });
+}
+
+/// Linear convolution with a fixed kernel by zero-padded FFT (plans, kernel spectrum and
+/// buffers reused across calls).
+///
+/// The kernel's centre pixel is `(k0 / 2, k1 / 2)` (odd sizes: the middle). `apply` returns
+/// `out[i, j] = sum_{a,b} in[i - a, j - b] K[a + k0/2, b + k1/2]` over the input's own shape
+/// ("same" mode), exact (no wrap-around) because the transform is padded by the kernel size.
+pub struct Convolver {
+    fft: Fft2,
+    rows: usize,
+    cols: usize,
+    kernel_hat: Vec<Complex<f64>>,
+    real: Vec<f64>,
+    tmp: Vec<Complex<f64>>,
+    spec: Vec<Complex<f64>>,
+}
+
+impl std::fmt::Debug for Convolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "Convolver({} x {} via {:?})",
+            self.rows, self.cols, self.fft
+        )
+    }
+}
+
+impl Convolver {
+    /// A convolver for inputs of `rows x cols` with `kernel`.
+    pub fn new(rows: usize, cols: usize, kernel: ArrayView2<f64>) -> Convolver {
+        let (k0, k1) = kernel.dim();
+        let n0 = fast_len(rows + k0);
+        let n1 = fast_len(cols + k1);
+        Self::with_fft_size(rows, cols, kernel, n0, n1)
+    }
+
+    /// As `new` but with an explicit transform size (at least the input size). Outputs at pixels
+    /// farther than the kernel half-width from the input border are exact for any such size
+    /// (used by the dwell solvers, whose aperture is the dwell grid shrunk by that half-width).
+    pub fn with_fft_size(
+        rows: usize,
+        cols: usize,
+        kernel: ArrayView2<f64>,
+        n0: usize,
+        n1: usize,
+    ) -> Convolver {
+        let n0 = n0.max(rows).max(1);
+        let n1 = n1.max(cols).max(1);
+        let fft = Fft2::new(n0, n1);
+        let mut real = vec![0.0; n0 * n1];
+        let (k0, k1) = kernel.dim();
+        let (c0, c1) = (k0 / 2, k1 / 2);
+        for ((a, b), &v) in kernel.indexed_iter() {
+            let i = (a as isize - c0 as isize).rem_euclid(n0 as isize) as usize;
+            let j = (b as isize - c1 as isize).rem_euclid(n1 as isize) as usize;
+            real[i * n1 + j] += v;
+        }
+        let mut tmp = vec![Complex::new(0.0, 0.0); fft.spectrum_len()];
+        let mut kernel_hat = tmp.clone();
+        fft.forward(&mut real, &mut tmp, &mut kernel_hat);
+        let spec = tmp.clone();
+        Convolver {
+            fft,
+            rows,
+            cols,
+            kernel_hat,
+            real,
+            tmp,
+            spec,
+        }
+    }
+
+    /// Input shape this convolver takes.
+    pub fn shape(&self) -> (usize, usize) {
+        (self.rows, self.cols)
+    }
+
+    /// The transform size.
+    pub fn fft_shape(&self) -> (usize, usize) {
+        self.fft.shape()
+    }
+
+    /// Convolution ("same" mode) of `input` (`rows x cols`) with the kernel.
+    pub fn apply(&mut self, input: ArrayView2<f64>) -> Array2<f64> {
+        let mut out = Array2::zeros((self.rows, self.cols));
+        self.run(input, false, &mut out);
+        out
+    }
+
+    /// Correlation with the kernel (the adjoint of `apply`).
+    pub fn apply_adjoint(&mut self, input: ArrayView2<f64>) -> Array2<f64> {
+        let mut out = Array2::zeros((self.rows, self.cols));
+        self.run(input, true, &mut out);
+        out
+    }
+
+    /// Convolution (or correlation when `adjoint`) into an existing output.
+    pub fn run(&mut self, input: ArrayView2<f64>, adjoint: bool, out: &mut Array2<f64>) {
+        let (n0, n1) = self.fft.shape();
+        let (r, c) = (self.rows.min(input.nrows()), self.cols.min(input.ncols()));
+        self.real.iter_mut().for_each(|v| *v = 0.0);
+        for i in 0..r {
+            let dst = &mut self.real[i * n1..i * n1 + c];
+            for (d, s) in dst.iter_mut().zip(input.row(i).iter()) {
+                *d = *s;
+            }
+        }
+        let _ = n0;
+        self.fft
+            .forward(&mut self.real, &mut self.tmp, &mut self.spec);
+        let kh = &self.kernel_hat;
+        self.spec
+            .par_iter_mut()
+            .zip(kh.par_iter())
+            .for_each(|(s, k)| {
+                *s *= if adjoint { k.conj() } else { *k };
+            });
+        self.fft
+            .inverse(&mut self.spec, &mut self.tmp, &mut self.real);
+        let (or, oc) = out.dim();
+        for i in 0..or.min(self.rows) {
+            let src = &self.real[i * n1..i * n1 + oc.min(self.cols)];
+            for (d, s) in out.row_mut(i).iter_mut().zip(src.iter()) {
+                *d = *s;
+            }
+        }
+    }
+
+    /// Transfer function magnitudes |K(f)| (transposed half-spectrum order) and the spectrum
+    /// itself, for inverse filters.
+    pub fn kernel_spectrum(&self) -> &[Complex<f64>] {
+        &self.kernel_hat
+    }
+
+    /// Applies an arbitrary pointwise filter `H(K(f))` in the frequency domain to `input`.
+    pub fn filter(
+        &mut self,
+        input: ArrayView2<f64>,
+        h: impl Fn(Complex<f64>) -> Complex<f64> + Sync,
+    ) -> Array2<f64> {
+        let n1 = self.fft.shape().1;
+        let (r, c) = (self.rows.min(input.nrows()), self.cols.min(input.ncols()));
+        self.real.iter_mut().for_each(|v| *v = 0.0);
+        for i in 0..r {
+            for (d, s) in self.real[i * n1..i * n1 + c]
+                .iter_mut()
+                .zip(input.row(i).iter())
+            {
+                *d = *s;
+            }
+        }
+        self.fft
+            .forward(&mut self.real, &mut self.tmp, &mut self.spec);
+        let kh = &self.kernel_hat;
+        self.spec
+            .par_iter_mut()
+            .zip(kh.par_iter())
+            .for_each(|(s, k)| *s *= h(*k));
+        self.fft
+            .inverse(&mut self.spec, &mut self.tmp, &mut self.real);
+        let mut out = Array2::zeros((self.rows, self.cols));
+        for i in 0..self.rows {
+            for (d, s) in out.row_mut(i).iter_mut().zip(self.real[i * n1..].iter()) {
+                *d = *s;
+            }
+        }
+        out
+    }
+}
+
+/// Direct "same"-mode convolution (brute force; the reference in tests).
+pub fn convolve_direct(input: ArrayView2<f64>, kernel: ArrayView2<f64>) -> Array2<f64> {
+    let (r, c) = input.dim();
+    let (k0, k1) = kernel.dim();
+    let (c0, c1) = ((k0 / 2) as isize, (k1 / 2) as isize);
+    let mut out = Array2::zeros((r, c));
+    for i in 0..r as isize {
+        for j in 0..c as isize {
+            let mut s = 0.0;
+            for a in 0..k0 as isize {
+                for b in 0..k1 as isize {
+                    let (ii, jj) = (i - (a - c0), j - (b - c1));
+                    if ii >= 0 && jj >= 0 && ii < r as isize && jj < c as isize {
+                        s += input[(ii as usize, jj as usize)] * kernel[(a as usize, b as usize)];
+                    }
+                }
+            }
+            out[(i as usize, j as usize)] = s;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bonnetlab_surface::rng::Rng;
+
+    fn random(r: usize, c: usize, seed: u64) -> Array2<f64> {
+        let mut rng = Rng::new(seed);
+        Array2::from_shape_fn((r, c), |_| rng.normal())
+    }
+
+    #[test]
+    fn fast_len_is_smooth_and_not_smaller() {
+        assert_eq!(fast_len(1), 1);
+        assert_eq!(fast_len(11), 12);
+        assert_eq!(fast_len(1201), 1215);
+        assert_eq!(fast_len(97), 98);
+    }
+
+    #[test]
+    fn fft_convolution_matches_direct_sum() {
+        for &(r, c, k0, k1) in &[(13, 17, 5, 3), (20, 9, 7, 7), (1, 30, 1, 5)] {
+            let x = random(r, c, 1);
+            let k = random(k0, k1, 2);
+            let mut conv = Convolver::new(r, c, k.view());
+            let fast = conv.apply(x.view());
+            let slow = convolve_direct(x.view(), k.view());
+            let err = (&fast - &slow).iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(err < 1e-10, "max error {err}");
+        }
+    }
+
+    #[test]
+    fn adjoint_is_the_transpose() {
+        let (r, c) = (12, 15);
+        let x = random(r, c, 3);
+        let y = random(r, c, 4);
+        let k = random(5, 7, 5);
+        let mut conv = Convolver::new(r, c, k.view());
+        let ax = conv.apply(x.view());
+        let aty = conv.apply_adjoint(y.view());
+        let lhs: f64 = ax.iter().zip(y.iter()).map(|(a, b)| a * b).sum();
+        let rhs: f64 = x.iter().zip(aty.iter()).map(|(a, b)| a * b).sum();
+        assert!((lhs - rhs).abs() < 1e-9 * lhs.abs().max(1.0));
+    }
+}

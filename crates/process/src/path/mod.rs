@@ -1,0 +1,154 @@
+//! Tool paths: commanded tool-centre positions sampled in time (the shared map frame, mm).
+//!
+//! Between samples the tool moves in a straight line at constant speed, so the dwell a point
+//! receives is the time the tool centre spends there. [`raster`] generates grating paths,
+//! [`log`] reads path logs (`t_s,x_mm,y_mm` CSV), [`kinematics`] turns a dwell map into feeds and
+//! applies the machine's velocity and acceleration limits.
+
+pub mod kinematics;
+pub mod log;
+pub mod raster;
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::ProcessError;
+
+pub use log::read_path_csv;
+pub use raster::{RasterSpec, ScanAxis};
+
+/// A tool path: times (s, strictly increasing) and tool-centre positions (mm).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct PathLog {
+    pub t_s: Vec<f64>,
+    pub x_mm: Vec<f64>,
+    pub y_mm: Vec<f64>,
+}
+
+impl PathLog {
+    /// A path from equal-length vectors; times must increase strictly and all be finite.
+    pub fn new(t_s: Vec<f64>, x_mm: Vec<f64>, y_mm: Vec<f64>) -> Result<PathLog, ProcessError> {
+        if t_s.len() != x_mm.len() || t_s.len() != y_mm.len() {
+            return Err(ProcessError::invalid("path vectors differ in length"));
+        }
+        for k in 0..t_s.len() {
+            if !(t_s[k].is_finite() && x_mm[k].is_finite() && y_mm[k].is_finite()) {
+                return Err(ProcessError::invalid(format!(
+                    "path sample {k} is not finite"
+                )));
+            }
+            if k > 0 && t_s[k] <= t_s[k - 1] {
+                return Err(ProcessError::invalid(format!(
+                    "path time does not increase at sample {k}"
+                )));
+            }
+        }
+        Ok(PathLog { t_s, x_mm, y_mm })
+    }
+
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    /// Total duration in s.
+    pub fn duration_s(&self) -> f64 {
+        match (self.t_s.first(), self.t_s.last()) {
+            (Some(a), Some(b)) => b - a,
+            _ => 0.0,
+        }
+    }
+
+    /// Total path length in mm.
+    pub fn length_mm(&self) -> f64 {
+        (1..self.len())
+            .map(|k| (self.x_mm[k] - self.x_mm[k - 1]).hypot(self.y_mm[k] - self.y_mm[k - 1]))
+            .sum()
+    }
+
+    /// Position at time t (linear between samples, clamped at the ends).
+    pub fn position_at(&self, t: f64) -> Option<(f64, f64)> {
+        let n = self.len();
+        if n == 0 {
+            return None;
+        }
+        if t <= self.t_s[0] {
+            return Some((self.x_mm[0], self.y_mm[0]));
+        }
+        if t >= self.t_s[n - 1] {
+            return Some((self.x_mm[n - 1], self.y_mm[n - 1]));
+        }
+        let k = self.t_s.partition_point(|&v| v <= t).max(1) - 1;
+        let f = (t - self.t_s[k]) / (self.t_s[k + 1] - self.t_s[k]);
+        Some((
+            self.x_mm[k] + f * (self.x_mm[k + 1] - self.x_mm[k]),
+            self.y_mm[k] + f * (self.y_mm[k + 1] - self.y_mm[k]),
+        ))
+    }
+
+    /// Sub-steps of the path: for every segment, `m` equal pieces no longer than `max_step_mm`
+    /// (and no longer than `max_dt_s` in time), each given as (midpoint x, y, duration, segment
+    /// index, fraction along the segment at the midpoint). Calls `f` for each.
+    pub fn for_each_substep(
+        &self,
+        max_step_mm: f64,
+        max_dt_s: f64,
+        mut f: impl FnMut(f64, f64, f64, usize, f64),
+    ) {
+        for k in 0..self.len().saturating_sub(1) {
+            let (x0, y0) = (self.x_mm[k], self.y_mm[k]);
+            let (ddx, ddy) = (self.x_mm[k + 1] - x0, self.y_mm[k + 1] - y0);
+            let dt = self.t_s[k + 1] - self.t_s[k];
+            let m = substeps(ddx.hypot(ddy), dt, max_step_mm, max_dt_s);
+            let h = dt / m as f64;
+            for s in 0..m {
+                let fr = (s as f64 + 0.5) / m as f64;
+                f(x0 + fr * ddx, y0 + fr * ddy, h, k, fr);
+            }
+        }
+    }
+}
+
+/// Number of equal sub-steps of a segment (at least 1, bounded so a corrupt log cannot ask for
+/// an absurd allocation of time).
+pub(crate) fn substeps(len_mm: f64, dt_s: f64, max_step_mm: f64, max_dt_s: f64) -> usize {
+    let a = if max_step_mm > 0.0 {
+        (len_mm / max_step_mm).ceil()
+    } else {
+        1.0
+    };
+    let b = if max_dt_s > 0.0 {
+        (dt_s / max_dt_s).ceil()
+    } else {
+        1.0
+    };
+    a.max(b).clamp(1.0, 1.0e7) as usize
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn substeps_cover_the_duration_and_length() {
+        let p = PathLog::new(
+            vec![0.0, 2.0, 3.0],
+            vec![0.0, 1.0, 1.0],
+            vec![0.0, 0.0, 0.5],
+        )
+        .unwrap();
+        let (mut t, mut x_weighted) = (0.0, 0.0);
+        p.for_each_substep(0.1, 1.0, |x, _, dt, _, _| {
+            t += dt;
+            x_weighted += x * dt;
+        });
+        assert!((t - 3.0).abs() < 1e-12);
+        // Time-weighted mean x: 2 s at mean 0.5, 1 s at 1.0.
+        assert!((x_weighted / t - 2.0 / 3.0).abs() < 1e-12);
+        assert!((p.length_mm() - 1.5).abs() < 1e-12);
+        assert_eq!(p.position_at(2.5), Some((1.0, 0.25)));
+        assert!(PathLog::new(vec![0.0, 0.0], vec![0.0; 2], vec![0.0; 2]).is_err());
+    }
+}
