@@ -7,7 +7,7 @@ use std::path::Path;
 use crate::error::ParseError;
 use crate::text::be_u32;
 use crate::zygo_text::ASC_SIGNATURE;
-use crate::{datx, metropro_dat};
+use crate::{csv_grid, datx, exr_map, metropro_dat};
 
 /// The map formats bonnetlab reads (and, for some, writes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -18,6 +18,10 @@ pub enum MapFormat {
     MetroProAsc,
     /// Mx `.datx` (HDF5).
     Datx,
+    /// Plain CSV grid of heights in nm.
+    Csv,
+    /// OpenEXR float height map.
+    Exr,
 }
 
 impl MapFormat {
@@ -27,6 +31,8 @@ impl MapFormat {
             MapFormat::MetroProDat => "metropro-dat",
             MapFormat::MetroProAsc => "metropro-asc",
             MapFormat::Datx => "datx",
+            MapFormat::Csv => "csv",
+            MapFormat::Exr => "exr",
         }
     }
 
@@ -37,6 +43,8 @@ impl MapFormat {
             "dat" => Some(MapFormat::MetroProDat),
             "asc" => Some(MapFormat::MetroProAsc),
             "datx" => Some(MapFormat::Datx),
+            "csv" => Some(MapFormat::Csv),
+            "exr" => Some(MapFormat::Exr),
             _ => None,
         }
     }
@@ -50,11 +58,17 @@ pub fn detect_format(bytes: &[u8], path: &Path) -> Result<MapFormat, ParseError>
     if datx::has_magic(bytes) {
         return Ok(MapFormat::Datx);
     }
+    if exr_map::has_magic(bytes) {
+        return Ok(MapFormat::Exr);
+    }
     let head = &bytes[..bytes.len().min(256)];
     let head_text = String::from_utf8_lossy(head);
     let first = head_text.trim_start_matches('\u{feff}').trim_start();
     if first.starts_with(ASC_SIGNATURE) {
         return Ok(MapFormat::MetroProAsc);
+    }
+    if csv_grid::looks_like(&bytes[..bytes.len().min(4096)]) {
+        return Ok(MapFormat::Csv);
     }
     if bytes.is_empty() {
         return Err(ParseError::invalid("the file is empty"));
@@ -76,8 +90,14 @@ pub fn detect_format(bytes: &[u8], path: &Path) -> Result<MapFormat, ParseError>
         Some(MapFormat::Datx) => Err(ParseError::invalid(
             "not an HDF5 file (no HDF5 signature at byte 0): not a .datx",
         )),
+        Some(MapFormat::Exr) => Err(ParseError::invalid(
+            "not an OpenEXR file (magic 76 2f 31 01 missing)",
+        )),
+        Some(MapFormat::Csv) => Err(ParseError::invalid(
+            "not a CSV grid: the first data line is not comma-separated numbers",
+        )),
         None => Err(ParseError::invalid(
-            "unrecognised map format (not MetroPro .dat, Mx .datx, Zygo ASCII .asc)",
+            "unrecognised map format (not MetroPro .dat, Mx .datx, Zygo ASCII .asc, EXR or a CSV grid)",
         )),
     }
 }

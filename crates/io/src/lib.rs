@@ -7,11 +7,15 @@
 //! CLI contract). Errors name the file and the field; none of the readers panics or allocates
 //! more than the file's size implies.
 
+pub mod atomic;
+pub mod csv_grid;
 pub mod datx;
 pub mod detect;
 pub mod error;
+pub mod exr_map;
 pub mod metropro_asc;
 pub mod metropro_dat;
+pub mod metropro_dat_write;
 pub mod text;
 pub mod zygo_meta;
 pub mod zygo_text;
@@ -38,5 +42,33 @@ pub fn parse_bytes(bytes: &[u8], fmt: MapFormat) -> Result<Surface, ParseError> 
         MapFormat::MetroProDat => metropro_dat::parse(bytes),
         MapFormat::MetroProAsc => metropro_asc::parse(bytes),
         MapFormat::Datx => datx::parse(bytes),
+        MapFormat::Csv => csv_grid::parse(bytes),
+        MapFormat::Exr => exr_map::parse(bytes),
     }
+}
+
+/// Writes a surface atomically in `fmt` (MetroPro `.dat`, CSV or EXR).
+pub fn write_surface(path: &Path, s: &Surface, fmt: MapFormat) -> Result<(), IoError> {
+    let unrep = |what: String| IoError::Unrepresentable {
+        file: path.display().to_string(),
+        what,
+    };
+    let result = match fmt {
+        MapFormat::MetroProDat => {
+            let bytes = metropro_dat_write::encode(s).map_err(unrep)?;
+            atomic::write_atomic(path, &bytes)
+        }
+        MapFormat::Exr => {
+            let bytes = exr_map::encode(s).map_err(unrep)?;
+            atomic::write_atomic(path, &bytes)
+        }
+        MapFormat::Csv => atomic::write_atomic_with(path, |w| csv_grid::write(s, w)),
+        other => {
+            return Err(unrep(format!(
+                "writing {} is not supported (write .dat, .csv or .exr)",
+                other.tag()
+            )))
+        }
+    };
+    result.map_err(|e| IoError::write(path, e))
 }
