@@ -89,17 +89,24 @@ impl Convolver {
 
     /// Spectrum of an array placed at the top-left corner of the FFT frame.
     pub fn spectrum(&self, a: &Array2<f64>) -> Spectrum {
+        self.spectrum_at(a, 0, 0)
+    }
+
+    /// Spectrum of an array placed at (r0, c0) in the FFT frame.
+    fn spectrum_at(&self, a: &Array2<f64>, r0: usize, c0: usize) -> Spectrum {
         let (ar, ac) = a.dim();
         let (ny, nx, ncx) = (self.ny, self.nx, self.ncx);
         let mut rows_spec = vec![Complex64::new(0.0, 0.0); ny * ncx];
         rows_spec
             .par_chunks_mut(ncx)
             .enumerate()
-            .take(ar.min(ny))
             .for_each(|(i, out)| {
+                if i < r0 || i - r0 >= ar {
+                    return;
+                }
                 let mut buf = vec![0.0; nx];
-                for (j, b) in buf.iter_mut().enumerate().take(ac.min(nx)) {
-                    *b = a[(i, j)];
+                for (j, b) in buf.iter_mut().enumerate().skip(c0).take(ac) {
+                    *b = a[(i - r0, j - c0)];
                 }
                 if buf.iter().any(|&v| v != 0.0) {
                     let _ = self.r2c.process(&mut buf, out);
@@ -171,6 +178,43 @@ impl Convolver {
     }
 }
 
+impl Convolver {
+    /// Correlation of a map-sized array with a kernel, on the extended grid:
+    /// `C[e] = sum_x r(x) K(x - p_e)`, `p_e` the position of extended pixel `e`.
+    pub fn correlate(&self, r: &Array2<f64>, k: &Spectrum) -> Array2<f64> {
+        let (ny, nx, ncx) = (self.ny, self.nx, self.ncx);
+        let rs = self.spectrum_at(r, 2 * self.hr, 2 * self.hc);
+        let mut prod = rs.data;
+        prod.par_chunks_mut(ny).enumerate().for_each(|(kx, col)| {
+            let off = kx * ny;
+            for (c, b) in col.iter_mut().zip(&k.data[off..off + ny]) {
+                *c *= b.conj();
+            }
+            self.inv.process(col);
+        });
+        let scale = 1.0 / (nx as f64 * ny as f64);
+        let (er, ec) = self.ext_dim();
+        let mut out = Array2::<f64>::zeros((er, ec));
+        out.as_slice_mut()
+            .expect("standard layout")
+            .par_chunks_mut(ec)
+            .enumerate()
+            .for_each(|(i, orow)| {
+                let mut spec: Vec<Complex64> = (0..ncx).map(|kx| prod[kx * ny + i]).collect();
+                spec[0].im = 0.0;
+                if nx % 2 == 0 {
+                    spec[ncx - 1].im = 0.0;
+                }
+                let mut real = vec![0.0; nx];
+                let _ = self.c2r.process(&mut spec, &mut real);
+                for (j, o) in orow.iter_mut().enumerate() {
+                    *o = real[j] * scale;
+                }
+            });
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -199,6 +243,32 @@ mod tests {
                     }
                 }
                 assert!((out[(i, j)] - s).abs() < 1e-9, "({i},{j}) {} vs {s}", out[(i, j)]);
+            }
+        }
+    }
+
+    #[test]
+    fn correlation_matches_brute_force() {
+        let (rows, cols, hr, hc) = (6, 8, 2, 1);
+        let conv = Convolver::new(rows, cols, hr, hc);
+        let (er, ec) = conv.ext_dim();
+        let r = Array2::from_shape_fn((rows, cols), |(i, j)| ((i * 5 + j * 2) % 7) as f64 - 2.0);
+        let k = Array2::from_shape_fn((2 * hr + 1, 2 * hc + 1), |(i, j)| i as f64 * 0.3 + j as f64 - 0.7);
+        let c = conv.correlate(&r, &conv.kernel_spectrum(&k));
+        for e in 0..er {
+            for f in 0..ec {
+                // extended (e, f) is map position (e - hr, f - hc)
+                let mut s = 0.0;
+                for i in 0..rows {
+                    for j in 0..cols {
+                        let a = i as isize - (e as isize - hr as isize) + hr as isize;
+                        let b = j as isize - (f as isize - hc as isize) + hc as isize;
+                        if a >= 0 && b >= 0 && a <= 2 * hr as isize && b <= 2 * hc as isize {
+                            s += r[(i, j)] * k[(a as usize, b as usize)];
+                        }
+                    }
+                }
+                assert!((c[(e, f)] - s).abs() < 1e-9, "({e},{f}) {} vs {s}", c[(e, f)]);
             }
         }
     }

@@ -1,0 +1,179 @@
+//! The effect library: one file per physical effect, each with its own model, detection
+//! (linearised columns about the current state, with initial parameters from their
+//! coefficients) and reporting. Selection (`selection`) decides which are accepted.
+//!
+//! Linearisations used (s0 = baseline rate scale, K the kernel, D_g the dwell map of
+//! `dt * g` at the executed positions):
+//! - rate effects are exactly linear: column `K * D_g`;
+//! - a path displacement e(t) of the executed spot: `K(x - p - e) ~ K - e . grad K`, column
+//!   `-(dK/dx) * D_{e_x} - (dK/dy) * D_{e_y}` per unit displacement;
+//! - TIF width: column `(dK/ds) * D`;
+//! - registration: column `grad(after) . dT/dtheta` (see `registration`).
+
+pub mod direction_lag;
+pub mod path_offset;
+pub mod periodic_path_error;
+pub mod rate_covariate;
+pub mod rate_drift;
+pub mod rate_oscillation;
+pub mod rate_profile;
+pub mod rate_step;
+pub mod registration;
+pub mod tif_scale;
+
+use ndarray::Array2;
+
+use crate::model::{Effect, Eval, Problem};
+
+/// A candidate effect: its linearised columns and how to turn their fitted coefficients into
+/// the effect's initial state.
+pub struct Candidate {
+    pub key: String,
+    pub kind: &'static str,
+    pub extra: Vec<Vec<f64>>,
+    /// (coefficients of `extra`, s0) -> effect.
+    pub make: Box<dyn Fn(&[f64], f64) -> Box<dyn Effect> + Send + Sync>,
+}
+
+/// Everything detection needs about the current state.
+pub struct Current<'a> {
+    pub p: &'a Problem,
+    pub ev: &'a Eval,
+    /// Current residual on the analysis pixels.
+    pub resid: &'a [f64],
+    pub accepted: &'a [Box<dyn Effect>],
+}
+
+impl Current<'_> {
+    pub fn has(&self, key: &str) -> bool {
+        self.accepted.iter().any(|e| e.key() == key)
+    }
+
+    /// Residual as a full map (0 off the aperture).
+    pub fn resid_map(&self) -> Array2<f64> {
+        self.p.expand(self.resid, &self.ev.w).0
+    }
+
+    /// Matched filter of the residual along the path: `h_k = dt_k * sum_x r(x) K'(x - p_k)`, the
+    /// residual's projection on a unit rate (or displacement) impulse at sub-step k for kernel K'.
+    pub fn matched(&self, kernel: &crate::fftconv::Spectrum) -> Vec<f64> {
+        let c = self.p.conv.correlate(&self.resid_map(), kernel);
+        let g = &self.p.grid;
+        let (hr, hc) = (self.p.conv.hr as f64, self.p.conv.hc as f64);
+        let (er, ec) = c.dim();
+        self.ev
+            .xs
+            .iter()
+            .zip(&self.ev.ys)
+            .zip(&self.p.samples.dt_s)
+            .map(|((&x, &y), &dt)| {
+                let fj = (x - g.x0_mm) / g.dx_mm + hc;
+                let fi = (y - g.y0_mm) / g.dy_mm + hr;
+                if !(fi >= 0.0 && fj >= 0.0 && fi < (er - 1) as f64 && fj < (ec - 1) as f64) {
+                    return 0.0;
+                }
+                let (i0, j0) = (fi as usize, fj as usize);
+                let (a, b) = (fi - i0 as f64, fj - j0 as f64);
+                dt * ((1.0 - a) * ((1.0 - b) * c[(i0, j0)] + b * c[(i0, j0 + 1)])
+                    + a * ((1.0 - b) * c[(i0 + 1, j0)] + b * c[(i0 + 1, j0 + 1)]))
+            })
+            .collect()
+    }
+
+    /// Column `sum_m K_m * D_{g_m}` at the executed positions, on the analysis pixels.
+    pub fn column(&self, terms: &[(&[f64], &crate::fftconv::Spectrum)]) -> Vec<f64> {
+        let spectra: Vec<crate::fftconv::Spectrum> =
+            terms.iter().map(|(g, _)| self.p.dwell_spectrum(&self.ev.xs, &self.ev.ys, Some(g))).collect();
+        let pairs: Vec<(&crate::fftconv::Spectrum, &crate::fftconv::Spectrum)> =
+            spectra.iter().zip(terms).map(|(d, (_, k))| (d, *k)).collect();
+        self.p.compress(&self.p.conv.apply_sum(&pairs))
+    }
+
+    /// Baseline column's coefficient scale (for turning column coefficients into parameters).
+    pub fn s0(&self) -> f64 {
+        1.0
+    }
+}
+
+/// Periods with the most power in `h` as a function of coordinate `q` (binned on a uniform
+/// grid, zero-padded x4, periodogram), between `p_min` and `p_max` (units of q), local maxima
+/// only, refined by parabolic interpolation of the log power. Returns up to `n` (period, power).
+pub fn spectral_peaks(q: &[f64], h: &[f64], p_min: f64, p_max: f64, n: usize) -> Vec<(f64, f64)> {
+    if q.is_empty() || !(p_min > 0.0) || p_max <= p_min {
+        return Vec::new();
+    }
+    let (lo, hi) = q.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, &v| (a.0.min(v), a.1.max(v)));
+    let bin = p_min / 4.0;
+    let nb = (((hi - lo) / bin).ceil() as usize + 1).min(1 << 20);
+    if nb < 8 {
+        return Vec::new();
+    }
+    let mut binned = vec![0.0; nb];
+    for (&qk, &hk) in q.iter().zip(h) {
+        let b = (((qk - lo) / bin) as usize).min(nb - 1);
+        binned[b] += hk;
+    }
+    let nfft = crate::fftconv::fast_len(4 * nb);
+    let mut planner = realfft::RealFftPlanner::<f64>::new();
+    let fft = planner.plan_fft_forward(nfft);
+    let mut input = vec![0.0; nfft];
+    input[..nb].copy_from_slice(&binned);
+    let mut out = fft.make_output_vec();
+    if fft.process(&mut input, &mut out).is_err() {
+        return Vec::new();
+    }
+    let pw: Vec<f64> = out.iter().map(|c| c.norm_sqr()).collect();
+    let df = 1.0 / (nfft as f64 * bin);
+    let kmin = ((1.0 / p_max) / df).ceil().max(2.0) as usize;
+    let kmax = (((1.0 / p_min) / df).floor() as usize).min(pw.len().saturating_sub(2));
+    let mut peaks = Vec::new();
+    for k in kmin.max(1)..=kmax {
+        if pw[k] > pw[k - 1] && pw[k] >= pw[k + 1] {
+            let (a, b, c) = (pw[k - 1].max(1e-300).ln(), pw[k].max(1e-300).ln(), pw[k + 1].max(1e-300).ln());
+            let den = a - 2.0 * b + c;
+            let d = if den.abs() > 1e-300 { (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { 0.0 };
+            peaks.push(((k as f64 + d) * df, pw[k]));
+        }
+    }
+    peaks.sort_by(|x, y| y.1.total_cmp(&x.1));
+    // Keep well-separated peaks (zero-padding makes side lobes 4 bins apart).
+    let mut kept: Vec<(f64, f64)> = Vec::new();
+    for (f, pwr) in peaks {
+        if kept.iter().all(|(g, _)| (f - g).abs() > 6.0 * df) {
+            kept.push((f, pwr));
+        }
+        if kept.len() >= n {
+            break;
+        }
+    }
+    kept.into_iter().map(|(f, pwr)| (1.0 / f, pwr)).collect()
+}
+
+/// All candidates of the library for the current state.
+pub fn candidates(cur: &Current) -> Vec<Candidate> {
+    let mut v = Vec::new();
+    v.extend(registration::candidates(cur));
+    v.extend(rate_drift::candidates(cur));
+    v.extend(tif_scale::candidates(cur));
+    v.extend(direction_lag::candidates(cur));
+    v.extend(path_offset::candidates(cur));
+    v.extend(periodic_path_error::candidates(cur));
+    v.extend(rate_covariate::candidates(cur));
+    v.extend(rate_oscillation::candidates(cur));
+    v.extend(rate_step::candidates(cur));
+    v.extend(rate_profile::candidates(cur));
+    v
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn finds_the_period_of_a_sampled_sine() {
+        let q: Vec<f64> = (0..5000).map(|k| k as f64 * 0.37).collect();
+        let h: Vec<f64> = q.iter().map(|x| (2.0 * std::f64::consts::PI * x / 23.0).sin()).collect();
+        let p = spectral_peaks(&q, &h, 2.0, 500.0, 2);
+        assert!((p[0].0 - 23.0).abs() < 0.1, "{:?}", p);
+    }
+}

@@ -1,0 +1,143 @@
+//! `periodic_path_error`: the executed path wiggles along one axis,
+//! `e(q) = a sin(2 pi q / P) + b cos(2 pi q / P)` (amplitude_mm = hypot(a, b)), where the phase
+//! runs with a coordinate of the commanded path: x, y, the arc length, or time (a vibration).
+//! Detection: the residual's matched filter for a displacement along the axis,
+//! `h_k = dt_k (r * dK/daxis)(p_k)`, is a function of q; its periodogram's peaks give candidate
+//! periods; the linearised columns `-(dK/daxis) * D_{sin}`, `... D_{cos}` give a and b.
+
+use crate::effects::{spectral_peaks, Candidate, Current};
+use crate::model::{Effect, Linear, Param, Problem};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Coord {
+    X,
+    Y,
+    Arc,
+    Time,
+}
+
+impl Coord {
+    pub fn name(self) -> &'static str {
+        match self {
+            Coord::X => "x",
+            Coord::Y => "y",
+            Coord::Arc => "arc_length",
+            Coord::Time => "time",
+        }
+    }
+
+    pub fn values(self, p: &Problem) -> Vec<f64> {
+        let s = &p.samples;
+        match self {
+            Coord::X => s.x_mm.clone(),
+            Coord::Y => s.y_mm.clone(),
+            Coord::Arc => s.arc_mm.clone(),
+            Coord::Time => s.t_s.iter().map(|t| t - s.t0_s).collect(),
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct PeriodicPathError {
+    pub axis_x: bool,
+    pub coord: Coord,
+    /// Period in the coordinate's unit (mm, or s for time).
+    pub period: f64,
+    pub a: f64,
+    pub b: f64,
+    /// Mean feed (mm/s), to express a time period in mm.
+    pub mean_feed: f64,
+}
+
+impl Effect for PeriodicPathError {
+    fn kind(&self) -> &'static str {
+        "periodic_path_error"
+    }
+    fn key(&self) -> String {
+        format!("periodic_path_error:{}:{}", if self.axis_x { "x" } else { "y" }, self.coord.name())
+    }
+    fn boxed_clone(&self) -> Box<dyn Effect> {
+        Box::new(self.clone())
+    }
+    fn nl(&self) -> Vec<f64> {
+        vec![self.period, self.a, self.b]
+    }
+    fn set_nl(&mut self, v: &[f64]) {
+        self.period = v[0].abs().max(1e-6);
+        self.a = v[1];
+        self.b = v[2];
+    }
+    fn nl_steps(&self) -> Vec<f64> {
+        vec![self.period * 1e-3, 0.003, 0.003]
+    }
+    fn moves_path(&self) -> bool {
+        true
+    }
+    fn perturb(&self, p: &Problem, xs: &mut [f64], ys: &mut [f64]) {
+        let q = self.coord.values(p);
+        let w = 2.0 * std::f64::consts::PI / self.period;
+        let target = if self.axis_x { xs } else { ys };
+        for (t, qk) in target.iter_mut().zip(q) {
+            *t += self.a * (w * qk).sin() + self.b * (w * qk).cos();
+        }
+    }
+    fn params(&self, _lin: &Linear) -> Vec<(String, Param)> {
+        let period_mm = if self.coord == Coord::Time { self.period * self.mean_feed } else { self.period };
+        let mut v = vec![
+            ("axis".into(), Param::Text(if self.axis_x { "x" } else { "y" }.into())),
+            ("amplitude_mm".into(), Param::Num(self.a.hypot(self.b))),
+            ("period_mm".into(), Param::Num(period_mm)),
+            ("phase_deg".into(), Param::Num(self.b.atan2(self.a).to_degrees())),
+            ("coordinate".into(), Param::Text(self.coord.name().into())),
+        ];
+        if self.coord == Coord::Time {
+            v.push(("period_s".into(), Param::Num(self.period)));
+        }
+        v
+    }
+}
+
+pub fn candidates(cur: &Current) -> Vec<Candidate> {
+    let p = cur.p;
+    let s = &p.samples;
+    let pix = p.grid.dx_mm.max(p.grid.dy_mm);
+    let duration = (s.t1_s - s.t0_s).max(1e-9);
+    let arc_total = s.arc_mm.last().copied().unwrap_or(0.0);
+    let mean_feed = arc_total / duration;
+    let max_feed = s.feed_mm_per_s.iter().cloned().fold(0.0, f64::max).max(1e-9);
+    let (wx, wy) = (p.grid.cols as f64 * p.grid.dx_mm, p.grid.rows as f64 * p.grid.dy_mm);
+    let mut out = Vec::new();
+    for axis_x in [true, false] {
+        let kern = if axis_x { &cur.ev.kernels.kx } else { &cur.ev.kernels.ky };
+        let h = cur.matched(kern);
+        for coord in [Coord::X, Coord::Y, Coord::Arc, Coord::Time] {
+            let key = format!("periodic_path_error:{}:{}", if axis_x { "x" } else { "y" }, coord.name());
+            if cur.has(&key) {
+                continue;
+            }
+            let q = coord.values(p);
+            let (pmin, pmax) = match coord {
+                Coord::X => (4.0 * pix, wx / 3.0),
+                Coord::Y => (4.0 * pix, wy / 3.0),
+                Coord::Arc => (4.0 * pix, wx.max(wy) / 3.0),
+                Coord::Time => (4.0 * pix / max_feed, wx.max(wy) / 3.0 / mean_feed.max(1e-9)),
+            };
+            for (period, _) in spectral_peaks(&q, &h, pmin, pmax, 2) {
+                let w = 2.0 * std::f64::consts::PI / period;
+                let gs: Vec<f64> = q.iter().map(|v| (w * v).sin()).collect();
+                let gc: Vec<f64> = q.iter().map(|v| (w * v).cos()).collect();
+                let cs: Vec<f64> = cur.column(&[(&gs, kern)]).into_iter().map(|v| -v).collect();
+                let cc: Vec<f64> = cur.column(&[(&gc, kern)]).into_iter().map(|v| -v).collect();
+                out.push(Candidate {
+                    key: key.clone(),
+                    kind: "periodic_path_error",
+                    extra: vec![cs, cc],
+                    make: Box::new(move |c, s0| {
+                        Box::new(PeriodicPathError { axis_x, coord, period, a: c[0] / s0, b: c[1] / s0, mean_feed })
+                    }),
+                });
+            }
+        }
+    }
+    out
+}

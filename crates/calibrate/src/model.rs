@@ -1,0 +1,547 @@
+//! The physical model of a run and its evaluation.
+//!
+//! Measured removal `M = before - after(T_reg(x))` on the analysis pixels (the after map resampled
+//! through the registration transform, see `registration`). Predicted removal:
+//!
+//! `P(x) = sum_j c_j * (K_s * D_{g_j})(x) + piston + tilt_x x + tilt_y y`
+//!
+//! where `D_g` splats `dt_k * g_k` of every path sub-step at its *executed* position (commanded
+//! position perturbed by the accepted path effects: lag, offset, periodic errors), `K_s` is the
+//! measured TIF widened by the accepted `tif_scale`, and `g_0 = 1` (baseline) while the other
+//! `g_j` are the accepted rate effects' weights (time, covariates, ...), centred by their dwell
+//! mean for conditioning. The linear coefficients are fitted jointly by least squares; the
+//! non-linear parameters (registration, scale, lag, periods, ...) are refined by variable
+//! projection (`refine`). Piston and tilt are the measurement's set-up terms: always fitted,
+//! never reported as an effect.
+
+use std::sync::{Arc, Mutex};
+
+use bonnetlab_surface::Surface;
+use ndarray::Array2;
+
+use crate::error::CalibrateError;
+use crate::fftconv::{Convolver, Spectrum};
+use crate::grid::{sample, signed_edge_distance, smooth_masked, splat, MapGrid};
+use crate::lsq;
+use crate::path::{densify, PathLog, Samples};
+use crate::tif::{kernel_gradient, TifMap};
+
+/// Largest TIF widening the kernel frame leaves room for.
+pub const MAX_SCALE: f64 = 1.5;
+
+/// A physical effect of the library, in the state it has been fitted to.
+pub trait Effect: Send + Sync {
+    /// Kind as reported (`registration`, `rate_drift`, ...).
+    fn kind(&self) -> &'static str;
+    /// Uniqueness key (kind plus covariate / axis): a key is accepted at most once.
+    fn key(&self) -> String;
+    fn boxed_clone(&self) -> Box<dyn Effect>;
+    /// Non-linear parameters (refined by variable projection) and their finite-difference steps.
+    fn nl(&self) -> Vec<f64> {
+        Vec::new()
+    }
+    fn set_nl(&mut self, _v: &[f64]) {}
+    fn nl_steps(&self) -> Vec<f64> {
+        Vec::new()
+    }
+    /// Whether the non-linear parameters move the executed path or the kernel (else only the
+    /// measured map): decides what must be recomputed.
+    fn moves_path(&self) -> bool {
+        false
+    }
+    /// Executed-position perturbation of every sub-step.
+    fn perturb(&self, _p: &Problem, _xs: &mut [f64], _ys: &mut [f64]) {}
+    /// TIF width factor.
+    fn scale(&self) -> f64 {
+        1.0
+    }
+    /// (dx_mm, dy_mm, rotation_rad) of the after map against the before map.
+    fn registration(&self) -> Option<[f64; 3]> {
+        None
+    }
+    /// Rate weight columns this effect adds: (name, g per sub-step).
+    fn rate_terms(&self, _p: &Problem) -> Vec<(String, Vec<f64>)> {
+        Vec::new()
+    }
+    /// Reported parameters, from the fitted linear coefficients.
+    fn params(&self, lin: &Linear) -> Vec<(String, Param)>;
+}
+
+impl Clone for Box<dyn Effect> {
+    fn clone(&self) -> Self {
+        self.boxed_clone()
+    }
+}
+
+/// A reported parameter value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Param {
+    Num(f64),
+    Text(String),
+    List(Vec<f64>),
+}
+
+/// The fitted linear coefficients, by column name, with the uncentred baseline rate.
+#[derive(Debug, Clone, Default)]
+pub struct Linear {
+    pub names: Vec<String>,
+    pub coef: Vec<f64>,
+    pub means: Vec<f64>,
+}
+
+impl Linear {
+    pub fn get(&self, name: &str) -> f64 {
+        self.names.iter().position(|n| n == name).map(|i| self.coef[i]).unwrap_or(0.0)
+    }
+
+    /// Baseline coefficient with the rate columns un-centred: the rate scale at g = 0.
+    pub fn s0(&self) -> f64 {
+        let mut s = self.get("baseline");
+        for (i, n) in self.names.iter().enumerate() {
+            if n != "baseline" && !n.starts_with("nuisance") && !n.starts_with("lin:") {
+                s -= self.coef[i] * self.means[i];
+            }
+        }
+        s
+    }
+}
+
+/// Per-sub-step covariates of the commanded path.
+#[derive(Debug, Clone)]
+pub struct Covariates {
+    pub names: Vec<&'static str>,
+    pub values: Vec<Vec<f64>>,
+}
+
+impl Covariates {
+    pub fn get(&self, name: &str) -> Option<&[f64]> {
+        self.names.iter().position(|n| *n == name).map(|i| self.values[i].as_slice())
+    }
+}
+
+/// Kernel spectra at one TIF scale.
+pub struct Kernels {
+    pub scale: f64,
+    pub k: Spectrum,
+    pub kx: Spectrum,
+    pub ky: Spectrum,
+    pub ks: Spectrum,
+}
+
+/// The data of a run, prepared once.
+pub struct Problem {
+    pub grid: MapGrid,
+    pub before: Array2<f64>,
+    pub before_valid: Array2<bool>,
+    pub after: Array2<f64>,
+    pub after_valid: Array2<bool>,
+    pub tif: TifMap,
+    pub samples: Samples,
+    pub conv: Convolver,
+    /// Flat indices (row-major) of the analysis pixels (valid in the before map).
+    pub idx: Vec<usize>,
+    /// Normalised coordinates of the analysis pixels for the tilt columns.
+    pub xn: Vec<f64>,
+    pub yn: Vec<f64>,
+    pub covariates: Covariates,
+    pub tif_radius_mm: f64,
+    kernels: Mutex<Vec<Arc<Kernels>>>,
+}
+
+impl Problem {
+    pub fn new(before: &Surface, after: &Surface, tif: &TifMap, path: &PathLog) -> Result<Self, CalibrateError> {
+        let grid = MapGrid::of(before)?;
+        if after.dim() != before.dim() {
+            return Err(CalibrateError::InvalidInput(format!(
+                "after map is {:?} pixels, before map {:?}: they must share a grid",
+                after.dim(),
+                before.dim()
+            )));
+        }
+        let (adx, ady) = after.pixel_mm("calibration")?;
+        if (adx - grid.dx_mm).abs() > 1e-6 * grid.dx_mm || (ady - grid.dy_mm).abs() > 1e-6 * grid.dy_mm {
+            return Err(CalibrateError::InvalidInput("after and before maps differ in pixel size".into()));
+        }
+        let radius = tif.support_radius_mm(0.005).max(2.0 * grid.dx_mm.max(grid.dy_mm));
+        let tif = tif.cropped_to_radius(radius * 1.1);
+        let hr = ((MAX_SCALE * radius * 1.1) / grid.dy_mm).ceil() as usize + 1;
+        let hc = ((MAX_SCALE * radius * 1.1) / grid.dx_mm).ceil() as usize + 1;
+        let conv = Convolver::new(grid.rows, grid.cols, hr, hc);
+        let samples = densify(path, 0.5 * grid.dx_mm.min(grid.dy_mm));
+        if samples.is_empty() {
+            return Err(CalibrateError::InvalidInput("the path log has no motion".into()));
+        }
+        let before_valid = before.valid().clone();
+        let idx: Vec<usize> = before_valid.iter().enumerate().filter_map(|(k, &v)| v.then_some(k)).collect();
+        if idx.len() < 64 {
+            return Err(CalibrateError::Processing(format!("only {} valid pixels in the before map", idx.len())));
+        }
+        let (cx, cy) = grid.centre_mm();
+        let half = 0.5 * (grid.cols as f64 * grid.dx_mm).max(grid.rows as f64 * grid.dy_mm);
+        let xn = idx.iter().map(|&k| (grid.x_mm(k % grid.cols) - cx) / half).collect();
+        let yn = idx.iter().map(|&k| (grid.y_mm(k / grid.cols) - cy) / half).collect();
+        let covariates = covariates(&grid, before, &samples);
+        Ok(Problem {
+            grid,
+            before: before.heights_nm().clone(),
+            before_valid,
+            after: after.heights_nm().clone(),
+            after_valid: after.valid().clone(),
+            tif,
+            samples,
+            conv,
+            idx,
+            xn,
+            yn,
+            covariates,
+            tif_radius_mm: radius,
+            kernels: Mutex::new(Vec::new()),
+        })
+    }
+
+    /// Kernel spectra (K, dK/dx, dK/dy, dK/ds) at a TIF scale, cached.
+    pub fn kernels(&self, scale: f64) -> Arc<Kernels> {
+        let scale = scale.clamp(0.5, MAX_SCALE);
+        if let Ok(cache) = self.kernels.lock() {
+            if let Some(k) = cache.iter().find(|k| k.scale == scale) {
+                return k.clone();
+            }
+        }
+        let (hr, hc, dx, dy) = (self.conv.hr, self.conv.hc, self.grid.dx_mm, self.grid.dy_mm);
+        let k = self.tif.kernel(dx, dy, hr, hc, scale);
+        let (gx, gy) = kernel_gradient(&k, dx, dy);
+        // dK/ds of K(x / s) = -(1 / s) (x . grad K)
+        let ks = Array2::from_shape_fn(k.dim(), |(a, b)| {
+            let y = (a as f64 - hr as f64) * dy;
+            let x = (b as f64 - hc as f64) * dx;
+            -(x * gx[(a, b)] + y * gy[(a, b)]) / scale
+        });
+        let c = &self.conv;
+        let set = Arc::new(Kernels {
+            scale,
+            k: c.kernel_spectrum(&k),
+            kx: c.kernel_spectrum(&gx),
+            ky: c.kernel_spectrum(&gy),
+            ks: c.kernel_spectrum(&ks),
+        });
+        if let Ok(mut cache) = self.kernels.lock() {
+            if cache.len() > 8 {
+                cache.remove(0);
+            }
+            cache.push(set.clone());
+        }
+        set
+    }
+
+    /// Dwell spectrum of `dt_k * g_k` at positions (xs, ys).
+    pub fn dwell_spectrum(&self, xs: &[f64], ys: &[f64], g: Option<&[f64]>) -> Spectrum {
+        let w: Vec<f64> = match g {
+            Some(g) => self.samples.dt_s.iter().zip(g).map(|(d, v)| d * v).collect(),
+            None => self.samples.dt_s.clone(),
+        };
+        let d = splat(&self.grid, self.conv.hr, self.conv.hc, xs, ys, &w);
+        self.conv.dwell_spectrum(&d)
+    }
+
+    /// Compresses a full map to the analysis pixels.
+    pub fn compress(&self, a: &Array2<f64>) -> Vec<f64> {
+        let s = a.as_slice();
+        match s {
+            Some(s) => self.idx.iter().map(|&k| s[k]).collect(),
+            None => self.idx.iter().map(|&k| a[(k / self.grid.cols, k % self.grid.cols)]).collect(),
+        }
+    }
+
+    /// Expands analysis-pixel values to a full map (0 elsewhere) with its mask.
+    pub fn expand(&self, v: &[f64], w: &[f64]) -> (Array2<f64>, Array2<bool>) {
+        let mut a = Array2::<f64>::zeros((self.grid.rows, self.grid.cols));
+        let mut m = Array2::from_elem((self.grid.rows, self.grid.cols), false);
+        for (n, &k) in self.idx.iter().enumerate() {
+            if w[n] > 0.0 {
+                let p = (k / self.grid.cols, k % self.grid.cols);
+                a[p] = v[n];
+                m[p] = true;
+            }
+        }
+        (a, m)
+    }
+
+    /// The after map resampled through the registration (dx, dy, theta): value at each pixel
+    /// centre x of `after_file(R(theta) (x - c) + c + d)`; bicubic where the 4x4 neighbourhood
+    /// is valid, bilinear where its 2x2 core is, invalid otherwise.
+    pub fn resample_after(&self, reg: [f64; 3]) -> (Array2<f64>, Array2<bool>) {
+        let g = &self.grid;
+        if reg == [0.0; 3] {
+            return (self.after.clone(), self.after_valid.clone());
+        }
+        let (cx, cy) = g.centre_mm();
+        let (c, s) = (reg[2].cos(), reg[2].sin());
+        let mut out = Array2::<f64>::zeros((g.rows, g.cols));
+        let mut val = Array2::from_elem((g.rows, g.cols), false);
+        let (r, cc) = (g.rows as isize, g.cols as isize);
+        for i in 0..g.rows {
+            for j in 0..g.cols {
+                let (x, y) = (g.x_mm(j) - cx, g.y_mm(i) - cy);
+                let (qx, qy) = (c * x - s * y + cx + reg[0], s * x + c * y + cy + reg[1]);
+                let fj = (qx - g.x0_mm) / g.dx_mm;
+                let fi = (qy - g.y0_mm) / g.dy_mm;
+                let (i0, j0) = (fi.floor() as isize, fj.floor() as isize);
+                if i0 < 0 || j0 < 0 || i0 + 1 >= r || j0 + 1 >= cc {
+                    continue;
+                }
+                let ok = |a: isize, b: isize| a >= 0 && b >= 0 && a < r && b < cc && self.after_valid[(a as usize, b as usize)];
+                if !(ok(i0, j0) && ok(i0 + 1, j0) && ok(i0, j0 + 1) && ok(i0 + 1, j0 + 1)) {
+                    continue;
+                }
+                let (ti, tj) = (fi - i0 as f64, fj - j0 as f64);
+                let all16 = (-1..3).all(|a| (-1..3).all(|b| ok(i0 + a, j0 + b)));
+                let v = if all16 {
+                    let wf = |t: f64| {
+                        [
+                            0.5 * (-t * t * t + 2.0 * t * t - t),
+                            0.5 * (3.0 * t * t * t - 5.0 * t * t + 2.0),
+                            0.5 * (-3.0 * t * t * t + 4.0 * t * t + t),
+                            0.5 * (t * t * t - t * t),
+                        ]
+                    };
+                    let (wi, wj) = (wf(ti), wf(tj));
+                    let mut acc = 0.0;
+                    for (a, wa) in wi.iter().enumerate() {
+                        for (b, wb) in wj.iter().enumerate() {
+                            acc += wa * wb * self.after[((i0 - 1 + a as isize) as usize, (j0 - 1 + b as isize) as usize)];
+                        }
+                    }
+                    acc
+                } else {
+                    let at = |a: isize, b: isize| self.after[(a as usize, b as usize)];
+                    (1.0 - ti) * ((1.0 - tj) * at(i0, j0) + tj * at(i0, j0 + 1))
+                        + ti * ((1.0 - tj) * at(i0 + 1, j0) + tj * at(i0 + 1, j0 + 1))
+                };
+                out[(i, j)] = v;
+                val[(i, j)] = true;
+            }
+        }
+        (out, val)
+    }
+}
+
+/// Per-sub-step covariates: time (s from start), x, y (mm), feed (mm/s), height (nm) and slope
+/// (nm/mm) of the before map with piston and tilt removed and lightly smoothed (sigma 2 px, so
+/// measurement noise does not dominate the slope), signed distance to the part edge (mm).
+fn covariates(g: &MapGrid, before: &Surface, s: &Samples) -> Covariates {
+    let valid = before.valid();
+    // Plane fit (piston, tilt) of the before map.
+    let (cx, cy) = g.centre_mm();
+    let mut acc = [0.0f64; 6];
+    for ((i, j), &v) in valid.indexed_iter() {
+        if v {
+            let (x, y, z) = (g.x_mm(j) - cx, g.y_mm(i) - cy, before.heights_nm()[(i, j)]);
+            acc[0] += z;
+            acc[1] += x * z;
+            acc[2] += y * z;
+            acc[3] += x * x;
+            acc[4] += y * y;
+            acc[5] += 1.0;
+        }
+    }
+    let (pz, px, py) = (acc[0] / acc[5].max(1.0), acc[1] / acc[3].max(1e-12), acc[2] / acc[4].max(1e-12));
+    let flat = Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
+        before.heights_nm()[(i, j)] - pz - px * (g.x_mm(j) - cx) - py * (g.y_mm(i) - cy)
+    });
+    let sm = smooth_masked(&flat, valid, 2.0);
+    let slope = Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
+        let jp = (j + 1).min(g.cols - 1);
+        let jm = j.saturating_sub(1);
+        let ip = (i + 1).min(g.rows - 1);
+        let im = i.saturating_sub(1);
+        let gx = (sm[(i, jp)] - sm[(i, jm)]) / ((jp - jm).max(1) as f64 * g.dx_mm);
+        let gy = (sm[(ip, j)] - sm[(im, j)]) / ((ip - im).max(1) as f64 * g.dy_mm);
+        gx.hypot(gy)
+    });
+    let edge = signed_edge_distance(valid, g.dx_mm, g.dy_mm);
+    let n = s.len();
+    let mut height = Vec::with_capacity(n);
+    let mut sl = Vec::with_capacity(n);
+    let mut ed = Vec::with_capacity(n);
+    let (xmin, xmax) = (g.x0_mm, g.x_mm(g.cols - 1));
+    let (ymin, ymax) = (g.y0_mm, g.y_mm(g.rows - 1));
+    for k in 0..n {
+        let (x, y) = (s.x_mm[k], s.y_mm[k]);
+        height.push(sample(g, &sm, x, y));
+        sl.push(sample(g, &slope, x, y));
+        // Off the map: continue the border value outwards (the part ends at the map edge).
+        let beyond = (xmin - x).max(0.0).max(x - xmax).hypot((ymin - y).max(0.0).max(y - ymax));
+        ed.push(sample(g, &edge, x, y) - beyond);
+    }
+    let time: Vec<f64> = s.t_s.iter().map(|t| t - s.t0_s).collect();
+    Covariates {
+        names: vec!["time", "x", "y", "feed", "height", "slope", "edge_distance"],
+        values: vec![time, s.x_mm.clone(), s.y_mm.clone(), s.feed_mm_per_s.clone(), height, sl, ed],
+    }
+}
+
+/// A model evaluated at one state of the accepted effects.
+pub struct Eval {
+    pub names: Vec<String>,
+    /// Columns on the analysis pixels.
+    pub cols: Vec<Vec<f64>>,
+    /// Dwell means used to centre rate columns (0 for baseline and nuisance).
+    pub means: Vec<f64>,
+    /// Measured removal on the analysis pixels and the 0/1 weights (common valid aperture).
+    pub m: Vec<f64>,
+    pub w: Vec<f64>,
+    /// Executed positions and the TIF scale of this state.
+    pub xs: Vec<f64>,
+    pub ys: Vec<f64>,
+    pub scale: f64,
+    pub reg: [f64; 3],
+    /// Resampled after map (full grid) and its mask.
+    pub after_res: Array2<f64>,
+    pub after_res_valid: Array2<bool>,
+    /// Spectrum of the plain dwell map at the executed positions.
+    pub dwell: Spectrum,
+    pub kernels: Arc<Kernels>,
+    /// Key of the path/kernel state (to reuse columns when only the registration moves).
+    pub path_key: Vec<f64>,
+}
+
+fn path_key(effects: &[Box<dyn Effect>]) -> Vec<f64> {
+    let mut k = Vec::new();
+    for e in effects {
+        if e.registration().is_none() {
+            k.extend(e.nl());
+            k.push(f64::from_bits(e.key().len() as u64));
+        }
+    }
+    k
+}
+
+/// Evaluates the model state; `reuse` lends the columns of a previous evaluation whose path
+/// state is the same.
+pub fn evaluate(p: &Problem, effects: &[Box<dyn Effect>], reuse: Option<&Eval>) -> Eval {
+    let key = path_key(effects);
+    let mut reg = [0.0; 3];
+    for e in effects {
+        if let Some(r) = e.registration() {
+            for (a, b) in reg.iter_mut().zip(r) {
+                *a += b;
+            }
+        }
+    }
+    let (after_res, after_res_valid) = p.resample_after(reg);
+    let before_s = p.before.as_slice().map(|s| s.to_vec()).unwrap_or_else(|| p.before.iter().cloned().collect());
+    let ar = after_res.as_slice().map(|s| s.to_vec()).unwrap_or_else(|| after_res.iter().cloned().collect());
+    let av: Vec<bool> = after_res_valid.iter().cloned().collect();
+    let m: Vec<f64> = p.idx.iter().map(|&k| before_s[k] - ar[k]).collect();
+    let w: Vec<f64> = p.idx.iter().map(|&k| if av[k] { 1.0 } else { 0.0 }).collect();
+
+    if let Some(prev) = reuse {
+        if prev.path_key == key {
+            return Eval {
+                names: prev.names.clone(),
+                cols: prev.cols.clone(),
+                means: prev.means.clone(),
+                m,
+                w,
+                xs: prev.xs.clone(),
+                ys: prev.ys.clone(),
+                scale: prev.scale,
+                reg,
+                after_res,
+                after_res_valid,
+                dwell: prev.dwell.clone(),
+                kernels: prev.kernels.clone(),
+                path_key: key,
+            };
+        }
+    }
+    let mut xs = p.samples.x_mm.clone();
+    let mut ys = p.samples.y_mm.clone();
+    let mut scale = 1.0;
+    for e in effects {
+        e.perturb(p, &mut xs, &mut ys);
+        scale *= e.scale();
+    }
+    let kernels = p.kernels(scale);
+    let dwell = p.dwell_spectrum(&xs, &ys, None);
+    let mut names = vec!["baseline".to_string()];
+    let mut cols = vec![p.compress(&p.conv.apply(&dwell, &kernels.k))];
+    let mut means = vec![0.0];
+    let terms: Vec<(String, Vec<f64>)> = effects.iter().flat_map(|e| e.rate_terms(p)).collect();
+    let built: Vec<(String, Vec<f64>, f64)> = terms_columns(p, &xs, &ys, &kernels, terms);
+    for (n, c, mean) in built {
+        names.push(n);
+        cols.push(c);
+        means.push(mean);
+    }
+    for (n, v) in [("nuisance:piston", vec![1.0; p.idx.len()]), ("nuisance:tilt_x", p.xn.clone()), ("nuisance:tilt_y", p.yn.clone())] {
+        names.push(n.into());
+        cols.push(v);
+        means.push(0.0);
+    }
+    Eval { names, cols, means, m, w, xs, ys, scale, reg, after_res, after_res_valid, dwell, kernels, path_key: key }
+}
+
+/// Columns `K * D_{g - mean(g)}` for rate terms (computed in parallel).
+pub fn terms_columns(
+    p: &Problem,
+    xs: &[f64],
+    ys: &[f64],
+    kernels: &Kernels,
+    terms: Vec<(String, Vec<f64>)>,
+) -> Vec<(String, Vec<f64>, f64)> {
+    terms
+        .into_iter()
+        .map(|(n, g)| {
+            let mean = p.samples.dwell_mean(&g);
+            let gc: Vec<f64> = g.iter().map(|v| v - mean).collect();
+            let d = p.dwell_spectrum(xs, ys, Some(&gc));
+            (n, p.compress(&p.conv.apply(&d, &kernels.k)), mean)
+        })
+        .collect()
+}
+
+/// Result of a linear fit.
+pub struct Fit {
+    pub coef: Vec<f64>,
+    /// Residual m - prediction on the analysis pixels (0 where w = 0).
+    pub resid: Vec<f64>,
+    pub rss: f64,
+    pub n: f64,
+}
+
+impl Fit {
+    pub fn rms(&self) -> f64 {
+        (self.rss / self.n.max(1.0)).sqrt()
+    }
+}
+
+/// Joint least-squares fit of all columns (plus `extra`) to m over the weighted pixels.
+pub fn fit(ev: &Eval, extra: &[Vec<f64>]) -> Result<Fit, CalibrateError> {
+    let cols: Vec<&[f64]> = ev.cols.iter().chain(extra.iter()).map(|c| c.as_slice()).collect();
+    let (g, r) = lsq::gram(&cols, &ev.m, &ev.w, None);
+    let coef = lsq::solve(&g, &r).ok_or_else(|| CalibrateError::Processing("singular least-squares fit".into()))?;
+    let mut resid = ev.m.clone();
+    let mut rss = 0.0;
+    let mut n = 0.0;
+    for i in 0..resid.len() {
+        if ev.w[i] > 0.0 {
+            let mut pred = 0.0;
+            for (c, col) in coef.iter().zip(&cols) {
+                pred += c * col[i];
+            }
+            resid[i] -= pred;
+            rss += resid[i] * resid[i];
+            n += 1.0;
+        } else {
+            resid[i] = 0.0;
+        }
+    }
+    Ok(Fit { coef, resid, rss, n })
+}
+
+impl Eval {
+    pub fn linear(&self, f: &Fit) -> Linear {
+        Linear { names: self.names.clone(), coef: f.coef[..self.names.len()].to_vec(), means: self.means.clone() }
+    }
+}

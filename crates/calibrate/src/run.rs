@@ -1,0 +1,337 @@
+//! The calibration driver: baseline, greedy hold-out selection of effects, joint refit,
+//! uncertainties, noise floor and unexplained structure. Result structs serialise to the JSON
+//! of `spec/interfaces.md` (`calibrate`).
+
+use ndarray::Array2;
+use rayon::prelude::*;
+use serde::Serialize;
+use serde_json::{Map, Value};
+
+use crate::effects::{candidates, Current};
+use crate::error::CalibrateError;
+use crate::model::{fit, Effect, Eval, Fit, Linear, Param, Problem};
+use crate::noise::removal_noise_floor;
+use crate::refine::{jacobian, refine, set_nl};
+use crate::selection::{base_gram, holdout, split, Score};
+use crate::unexplained::{self, Unexplained};
+
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Upper bound on accepted effects (a guard; selection normally stops earlier).
+    pub max_effects: usize,
+    /// Levenberg-Marquardt iterations after each acceptance (twice that for the final refit).
+    pub refine_iters: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options { max_effects: 6, refine_iters: 6 }
+    }
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Baseline {
+    pub residual_rms_nm: f64,
+    pub residual_pv_nm: f64,
+    pub measured_removal_rms_nm: f64,
+    /// Fitted rate scale of the baseline (1 = the measured spot's rate).
+    pub rate_scale: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Final {
+    pub residual_rms_nm: f64,
+    pub residual_pv_nm: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct EffectReport {
+    pub kind: String,
+    pub params: Map<String, Value>,
+    /// One-sigma uncertainties of the numeric parameters (same keys).
+    pub uncertainties: Map<String, Value>,
+    pub residual_rms_before_nm: f64,
+    pub residual_rms_after_nm: f64,
+    /// Held-out z statistic at acceptance (see `selection`).
+    pub significance: f64,
+    /// Held-out reduction of the residual sum of squares, as a fraction.
+    pub heldout_reduction_fraction: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct CandidateScore {
+    pub key: String,
+    pub z: f64,
+    pub heldout_reduction_fraction: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Round {
+    pub accepted: Option<String>,
+    pub candidates: Vec<CandidateScore>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Calibration {
+    pub baseline: Baseline,
+    #[serde(rename = "final")]
+    pub final_: Final,
+    pub noise_floor_rms_nm: f64,
+    pub effects: Vec<EffectReport>,
+    pub unexplained: Vec<Unexplained>,
+    /// Every round's candidate scores (the diagnosis trail).
+    pub rounds: Vec<Round>,
+    #[serde(skip)]
+    pub maps: Maps,
+}
+
+/// Maps for the report (full grid, mask).
+#[derive(Debug, Clone, Default)]
+pub struct Maps {
+    pub measured_removal_nm: Option<(Array2<f64>, Array2<bool>)>,
+    pub baseline_residual_nm: Option<(Array2<f64>, Array2<bool>)>,
+    pub final_residual_nm: Option<(Array2<f64>, Array2<bool>)>,
+    pub dx_mm: f64,
+    pub dy_mm: f64,
+}
+
+fn pv(f: &Fit, w: &[f64]) -> f64 {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (r, &wi) in f.resid.iter().zip(w) {
+        if wi > 0.0 {
+            lo = lo.min(*r);
+            hi = hi.max(*r);
+        }
+    }
+    if hi >= lo {
+        hi - lo
+    } else {
+        0.0
+    }
+}
+
+fn param_value(p: &Param) -> Value {
+    match p {
+        Param::Num(v) => serde_json::json!(v),
+        Param::Text(s) => Value::String(s.clone()),
+        Param::List(v) => serde_json::json!(v),
+    }
+}
+
+/// Numeric parameters of all effects as one flat vector (for the delta method).
+fn flat_params(effects: &[Box<dyn Effect>], lin: &Linear) -> Vec<f64> {
+    let mut v = Vec::new();
+    for e in effects {
+        for (_, p) in e.params(lin) {
+            match p {
+                Param::Num(x) => v.push(x),
+                Param::List(xs) => v.extend(xs),
+                Param::Text(_) => {}
+            }
+        }
+    }
+    v
+}
+
+/// One-sigma uncertainties of every numeric parameter: full Jacobian (linear columns and
+/// forward-difference columns of the non-linear parameters at fixed linear coefficients),
+/// covariance `s^2 (J^T J)^-1` with `s^2 = RSS / (n - p)`, propagated by finite differences.
+/// Assumes independent residuals; spatially correlated residual structure makes them optimistic.
+fn uncertainties(p: &Problem, effects: &[Box<dyn Effect>], ev: &Eval, f: &Fit) -> Result<Vec<f64>, CalibrateError> {
+    let lin_cols: Vec<Vec<f64>> = ev.cols.iter().map(|c| c.iter().zip(&ev.w).map(|(a, w)| a * w).collect()).collect();
+    let nl_cols = jacobian(p, effects, ev, f, false)?;
+    let nlin = lin_cols.len();
+    let all: Vec<&[f64]> = lin_cols.iter().map(|c| c.as_slice()).chain(nl_cols.iter().map(|c| c.as_slice())).collect();
+    let n = all.len();
+    let mut jtj = vec![vec![0.0; n]; n];
+    for a in 0..n {
+        for b in a..n {
+            let s: f64 = all[a].iter().zip(all[b]).map(|(x, y)| x * y).sum();
+            jtj[a][b] = s;
+            jtj[b][a] = s;
+        }
+    }
+    let cov = crate::lsq::inverse(&jtj).ok_or_else(|| CalibrateError::Processing("singular covariance".into()))?;
+    let s2 = f.rss / (f.n - n as f64).max(1.0);
+    let lin0 = ev.linear(f);
+    let base = flat_params(effects, &lin0);
+    let theta0: Vec<f64> = effects.iter().flat_map(|e| e.nl()).collect();
+    let steps: Vec<f64> = effects.iter().flat_map(|e| e.nl_steps()).collect();
+    let mut grads = vec![vec![0.0; n]; base.len()];
+    for j in 0..n {
+        let (vals, h) = if j < nlin {
+            let h = 1e-6 * f.coef[j].abs().max(1e-9);
+            let mut lin = lin0.clone();
+            lin.coef[j] += h;
+            (flat_params(effects, &lin), h)
+        } else {
+            let k = j - nlin;
+            let mut t = theta0.clone();
+            t[k] += steps[k];
+            let mut trial: Vec<Box<dyn Effect>> = effects.to_vec();
+            set_nl(&mut trial, &t);
+            (flat_params(&trial, &lin0), steps[k])
+        };
+        for (g, (v, b)) in grads.iter_mut().zip(vals.iter().zip(&base)) {
+            g[j] = (v - b) / h;
+        }
+    }
+    Ok(grads
+        .iter()
+        .map(|g| {
+            let mut s = 0.0;
+            for a in 0..n {
+                for b in 0..n {
+                    s += g[a] * cov[a][b] * g[b];
+                }
+            }
+            (s2 * s).max(0.0).sqrt()
+        })
+        .collect())
+}
+
+/// Runs the whole calibration on a prepared problem.
+pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateError> {
+    let mut effects: Vec<Box<dyn Effect>> = Vec::new();
+    let (mut ev, mut f) = refine(p, &mut effects, 0)?;
+    if f.n < 64.0 {
+        return Err(CalibrateError::Processing("fewer than 64 pixels valid in both maps".into()));
+    }
+    // Measured removal after removing the set-up terms alone.
+    let nuis: Vec<usize> = ev.names.iter().enumerate().filter(|(_, n)| n.starts_with("nuisance")).map(|(i, _)| i).collect();
+    let only_nuis = Eval { cols: nuis.iter().map(|&i| ev.cols[i].clone()).collect(), names: nuis.iter().map(|&i| ev.names[i].clone()).collect(), ..clone_eval_shell(&ev) };
+    let fm = fit(&only_nuis, &[])?;
+    let baseline = Baseline {
+        residual_rms_nm: f.rms(),
+        residual_pv_nm: pv(&f, &ev.w),
+        measured_removal_rms_nm: fm.rms(),
+        rate_scale: f.coef[0],
+    };
+    let mut maps = Maps {
+        measured_removal_nm: Some(p.expand(&fm.resid, &ev.w)),
+        baseline_residual_nm: Some(p.expand(&f.resid, &ev.w)),
+        dx_mm: p.grid.dx_mm,
+        dy_mm: p.grid.dy_mm,
+        ..Maps::default()
+    };
+    let sp = split(p);
+    let mut rounds = Vec::new();
+    let mut accepted: Vec<(String, f64, f64, Score)> = Vec::new(); // key, rms before, rms after, score
+    let mut blocked: Vec<String> = Vec::new();
+    for _ in 0..opts.max_effects {
+        let cur = Current { p, ev: &ev, resid: &f.resid, accepted: &effects };
+        let cands: Vec<_> = candidates(&cur).into_iter().filter(|c| !blocked.contains(&c.key)).collect();
+        let bg = base_gram(&ev, &sp);
+        let scores: Vec<Score> = cands.par_iter().map(|c| holdout(&ev, &c.extra, &sp, &bg)).collect();
+        let mut round = Round {
+            accepted: None,
+            candidates: cands
+                .iter()
+                .zip(&scores)
+                .map(|(c, s)| CandidateScore { key: c.key.clone(), z: s.z, heldout_reduction_fraction: s.fraction })
+                .collect(),
+        };
+        let best = scores
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.significant())
+            .max_by(|a, b| a.1.delta.total_cmp(&b.1.delta))
+            .map(|(i, s)| (i, *s));
+        let Some((bi, score)) = best else {
+            rounds.push(round);
+            break;
+        };
+        let cand = &cands[bi];
+        let fc = fit(&ev, &cand.extra)?;
+        let nb = ev.cols.len();
+        let new = (cand.make)(&fc.coef[nb..], fc.coef[0]);
+        let rms_before = f.rms();
+        let mut trial = effects.clone();
+        trial.push(new);
+        let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
+        if f_t.rms() >= rms_before {
+            blocked.push(cand.key.clone());
+            rounds.push(round);
+            continue;
+        }
+        round.accepted = Some(cand.key.clone());
+        rounds.push(round);
+        accepted.push((cand.key.clone(), rms_before, f_t.rms(), score));
+        effects = trial;
+        ev = ev_t;
+        f = f_t;
+    }
+    if !effects.is_empty() {
+        let (e2, f2) = refine(p, &mut effects, 2 * opts.refine_iters)?;
+        ev = e2;
+        f = f2;
+    }
+    let lin = ev.linear(&f);
+    let sig = if effects.is_empty() { Vec::new() } else { uncertainties(p, &effects, &ev, &f).unwrap_or_default() };
+    let mut k = 0;
+    let mut reports = Vec::new();
+    for (e, (_, rb, ra, score)) in effects.iter().zip(&accepted) {
+        let mut params = Map::new();
+        let mut unc = Map::new();
+        for (name, v) in e.params(&lin) {
+            match &v {
+                Param::Num(_) => {
+                    if let Some(s) = sig.get(k) {
+                        unc.insert(name.clone(), serde_json::json!(s));
+                    }
+                    k += 1;
+                }
+                Param::List(xs) => {
+                    let s: Vec<f64> = (0..xs.len()).map(|i| sig.get(k + i).copied().unwrap_or(f64::NAN)).collect();
+                    if s.iter().all(|v| v.is_finite()) {
+                        unc.insert(name.clone(), serde_json::json!(s));
+                    }
+                    k += xs.len();
+                }
+                Param::Text(_) => {}
+            }
+            params.insert(name, param_value(&v));
+        }
+        reports.push(EffectReport {
+            kind: e.kind().into(),
+            params,
+            uncertainties: unc,
+            residual_rms_before_nm: *rb,
+            residual_rms_after_nm: *ra,
+            significance: score.z,
+            heldout_reduction_fraction: score.fraction,
+        });
+    }
+    let noise = removal_noise_floor(&p.before, &p.before_valid, &p.after, &p.after_valid);
+    let (rmap, rmask) = p.expand(&f.resid, &ev.w);
+    let unexplained = unexplained::find(&p.grid, &rmap, &rmask, noise, f.rms());
+    maps.final_residual_nm = Some((rmap, rmask));
+    Ok(Calibration {
+        baseline,
+        final_: Final { residual_rms_nm: f.rms(), residual_pv_nm: pv(&f, &ev.w) },
+        noise_floor_rms_nm: noise,
+        effects: reports,
+        unexplained,
+        rounds,
+        maps,
+    })
+}
+
+fn clone_eval_shell(ev: &Eval) -> Eval {
+    Eval {
+        names: Vec::new(),
+        cols: Vec::new(),
+        means: Vec::new(),
+        m: ev.m.clone(),
+        w: ev.w.clone(),
+        xs: Vec::new(),
+        ys: Vec::new(),
+        scale: ev.scale,
+        reg: ev.reg,
+        after_res: Array2::zeros((0, 0)),
+        after_res_valid: Array2::from_elem((0, 0), false),
+        dwell: ev.dwell.clone(),
+        kernels: ev.kernels.clone(),
+        path_key: Vec::new(),
+    }
+}

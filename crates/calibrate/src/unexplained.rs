@@ -1,0 +1,143 @@
+//! Residual structure that no accepted effect explains: bands of the residual's X and Y PSDs
+//! (one-sided, nm^2 mm) that stand above the white-noise level implied by the noise floor
+//! (`2 sigma^2 d` one-sided), with where on the part they sit.
+//!
+//! A band is a run of bins whose 5-bin running mean exceeds `EXCESS` times the white level,
+//! gaps of up to 2 bins bridged; its RMS is the excess over the white level, summed as bin sums.
+//! Its region: the residual low-passed to the band (Gaussian, sigma = 1 / (4 f_high)), RMS per
+//! hold-out block, and the bounding box of blocks holding at least half the largest block RMS.
+
+use ndarray::Array2;
+use serde::Serialize;
+
+use crate::grid::{smooth_masked, MapGrid};
+use crate::psd::psd_1d;
+
+pub const EXCESS: f64 = 3.0;
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Unexplained {
+    pub description: String,
+    pub band_per_mm: [f64; 2],
+    pub rms_nm: f64,
+    /// "x" (along rows, scan) or "y" (along columns, feed), or "both" for broadband.
+    pub direction: String,
+    /// [x_min, x_max, y_min, y_max] in mm.
+    pub region_mm: [f64; 4],
+}
+
+fn region(g: &MapGrid, r: &Array2<f64>, valid: &Array2<bool>, f_hi: f64) -> ([f64; 4], f64) {
+    let sigma_px = (0.25 / f_hi.max(1e-9) / g.dx_mm.min(g.dy_mm)).clamp(0.0, 20.0);
+    let s = if sigma_px >= 0.7 { smooth_masked(r, valid, sigma_px) } else { r.clone() };
+    let b = (g.rows.min(g.cols) / 10).max(4);
+    let (nbr, nbc) = (g.rows.div_ceil(b), g.cols.div_ceil(b));
+    let mut acc = vec![(0.0, 0usize); nbr * nbc];
+    for ((i, j), &v) in valid.indexed_iter() {
+        if v {
+            let a = &mut acc[(i / b) * nbc + j / b];
+            a.0 += s[(i, j)] * s[(i, j)];
+            a.1 += 1;
+        }
+    }
+    let rms: Vec<f64> = acc.iter().map(|(s2, n)| if *n > 0 { (s2 / *n as f64).sqrt() } else { 0.0 }).collect();
+    let max = rms.iter().cloned().fold(0.0, f64::max);
+    let mut bbox = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+    let mut hit = 0usize;
+    for (k, &v) in rms.iter().enumerate() {
+        if max > 0.0 && v >= 0.5 * max {
+            hit += 1;
+            let (bi, bj) = (k / nbc, k % nbc);
+            bbox[0] = bbox[0].min(g.x_mm(bj * b));
+            bbox[1] = bbox[1].max(g.x_mm(((bj + 1) * b).min(g.cols) - 1));
+            bbox[2] = bbox[2].min(g.y_mm(bi * b));
+            bbox[3] = bbox[3].max(g.y_mm(((bi + 1) * b).min(g.rows) - 1));
+        }
+    }
+    if hit == 0 {
+        bbox = [g.x_mm(0), g.x_mm(g.cols - 1), g.y_mm(0), g.y_mm(g.rows - 1)];
+    }
+    (bbox, hit as f64 / rms.iter().filter(|v| **v > 0.0).count().max(1) as f64)
+}
+
+/// Bands of unexplained structure in a residual map, given the noise floor (nm RMS).
+pub fn find(g: &MapGrid, r: &Array2<f64>, valid: &Array2<bool>, noise_rms_nm: f64, total_rms_nm: f64) -> Vec<Unexplained> {
+    let mut out = Vec::new();
+    for along_x in [true, false] {
+        let d = if along_x { g.dx_mm } else { g.dy_mm };
+        let p = psd_1d(r, valid, d, along_x);
+        let white = 2.0 * noise_rms_nm * noise_rms_nm * d;
+        let n = p.psd_nm2_mm.len();
+        let sm: Vec<f64> = (0..n)
+            .map(|k| {
+                let (a, b) = (k.saturating_sub(2), (k + 3).min(n));
+                p.psd_nm2_mm[a..b].iter().sum::<f64>() / (b - a) as f64
+            })
+            .collect();
+        let mut k = 1;
+        while k < n {
+            if sm[k] > EXCESS * white {
+                let start = k;
+                let mut end = k;
+                let mut gap = 0;
+                while k < n && gap <= 2 {
+                    if sm[k] > EXCESS * white {
+                        end = k;
+                        gap = 0;
+                    } else {
+                        gap += 1;
+                    }
+                    k += 1;
+                }
+                let ex: f64 = (start..=end).map(|b| (p.psd_nm2_mm[b] - white).max(0.0) * p.df_per_mm).sum();
+                let rms = ex.sqrt();
+                if rms > 0.3 * noise_rms_nm.max(1e-12) {
+                    let (f1, f2) = (p.freq_per_mm[start], p.freq_per_mm[end]);
+                    let (bbox, share) = region(g, r, valid, f2.max(p.df_per_mm));
+                    let dir = if along_x { "x" } else { "y" };
+                    let per = |f: f64| if f > 0.0 { format!("{:.2}", 1.0 / f) } else { "inf".into() };
+                    out.push(Unexplained {
+                        description: format!(
+                            "structure varying along {dir} at {f1:.4}-{f2:.4} /mm (periods {}-{} mm), {} nm RMS above the noise, \
+                             strongest at x {:.1}-{:.1} mm, y {:.1}-{:.1} mm ({})",
+                            per(f2),
+                            per(f1),
+                            format_args!("{rms:.3}"),
+                            bbox[0],
+                            bbox[1],
+                            bbox[2],
+                            bbox[3],
+                            if share < 0.3 { "local" } else { "widespread" }
+                        ),
+                        band_per_mm: [f1, f2],
+                        rms_nm: rms,
+                        direction: dir.into(),
+                        region_mm: bbox,
+                    });
+                }
+            } else {
+                k += 1;
+            }
+        }
+    }
+    out.sort_by(|a, b| b.rms_nm.total_cmp(&a.rms_nm));
+    out.truncate(4);
+    let excess_total = (total_rms_nm.powi(2) - noise_rms_nm.powi(2)).max(0.0).sqrt();
+    if out.is_empty() && excess_total > 0.5 * noise_rms_nm {
+        let (bbox, share) = region(g, r, valid, 0.5 / g.dx_mm.max(g.dy_mm));
+        out.push(Unexplained {
+            description: format!(
+                "broadband residual {excess_total:.3} nm RMS above the noise floor, strongest at x {:.1}-{:.1} mm, y {:.1}-{:.1} mm ({})",
+                bbox[0],
+                bbox[1],
+                bbox[2],
+                bbox[3],
+                if share < 0.3 { "local" } else { "widespread" }
+            ),
+            band_per_mm: [0.0, 0.5 / g.dx_mm.min(g.dy_mm)],
+            rms_nm: excess_total,
+            direction: "both".into(),
+            region_mm: bbox,
+        });
+    }
+    out
+}
