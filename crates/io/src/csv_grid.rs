@@ -80,7 +80,7 @@ pub fn parse(bytes: &[u8]) -> Result<Surface, ParseError> {
                     _ => continue,
                 };
                 let val = num(v, line_no, k)?;
-                if !(val > 0.0) {
+                if val <= 0.0 {
                     return Err(ParseError::invalid(format!(
                         "line {line_no}: {k} = {v} must be positive"
                     )));

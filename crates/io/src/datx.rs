@@ -194,7 +194,7 @@ fn read_surface_dataset(ds: &Dataset, path: &str) -> Result<Surface, ParseError>
         let p = converter_parameters(ds, a)?;
         match p.get(1) {
             Some(&v) if v.is_finite() && v > 0.0 => Ok(Some(v * 1e3)),
-            Some(&v) if v == 0.0 => Ok(None),
+            Some(0.0) => Ok(None),
             Some(&v) => Err(ParseError::invalid(format!(
                 "attribute {name} Parameters[1] = {v} is not a pixel size in m"
             ))),

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use crate::error::ParseError;
 use crate::text::be_u32;
-use crate::zygo_text::ASC_SIGNATURE;
+use crate::zygo_text::{ASC_SIGNATURE, XYZ_SIGNATURE};
 use crate::{csv_grid, datx, exr_map, metropro_dat};
 
 /// The map formats bonnetlab reads (and, for some, writes).
@@ -16,6 +16,8 @@ pub enum MapFormat {
     MetroProDat,
     /// Zygo ASCII export `.asc` (Format 2).
     MetroProAsc,
+    /// Zygo XYZ export `.xyz` (Format 1).
+    ZygoXyz,
     /// Mx `.datx` (HDF5).
     Datx,
     /// Plain CSV grid of heights in nm.
@@ -30,6 +32,7 @@ impl MapFormat {
         match self {
             MapFormat::MetroProDat => "metropro-dat",
             MapFormat::MetroProAsc => "metropro-asc",
+            MapFormat::ZygoXyz => "zygo-xyz",
             MapFormat::Datx => "datx",
             MapFormat::Csv => "csv",
             MapFormat::Exr => "exr",
@@ -42,6 +45,7 @@ impl MapFormat {
         match ext.as_str() {
             "dat" => Some(MapFormat::MetroProDat),
             "asc" => Some(MapFormat::MetroProAsc),
+            "xyz" => Some(MapFormat::ZygoXyz),
             "datx" => Some(MapFormat::Datx),
             "csv" => Some(MapFormat::Csv),
             "exr" => Some(MapFormat::Exr),
@@ -67,6 +71,9 @@ pub fn detect_format(bytes: &[u8], path: &Path) -> Result<MapFormat, ParseError>
     if first.starts_with(ASC_SIGNATURE) {
         return Ok(MapFormat::MetroProAsc);
     }
+    if first.starts_with(XYZ_SIGNATURE) {
+        return Ok(MapFormat::ZygoXyz);
+    }
     if csv_grid::looks_like(&bytes[..bytes.len().min(4096)]) {
         return Ok(MapFormat::Csv);
     }
@@ -87,6 +94,9 @@ pub fn detect_format(bytes: &[u8], path: &Path) -> Result<MapFormat, ParseError>
         Some(MapFormat::MetroProAsc) => Err(ParseError::invalid(format!(
             "line 1 is not '{ASC_SIGNATURE} ...'"
         ))),
+        Some(MapFormat::ZygoXyz) => Err(ParseError::invalid(format!(
+            "line 1 is not '{XYZ_SIGNATURE} ...'"
+        ))),
         Some(MapFormat::Datx) => Err(ParseError::invalid(
             "not an HDF5 file (no HDF5 signature at byte 0): not a .datx",
         )),
@@ -97,7 +107,7 @@ pub fn detect_format(bytes: &[u8], path: &Path) -> Result<MapFormat, ParseError>
             "not a CSV grid: the first data line is not comma-separated numbers",
         )),
         None => Err(ParseError::invalid(
-            "unrecognised map format (not MetroPro .dat, Mx .datx, Zygo ASCII .asc, EXR or a CSV grid)",
+            "unrecognised map format (not MetroPro .dat, Mx .datx, Zygo ASCII .asc or .xyz, EXR or a CSV grid)",
         )),
     }
 }

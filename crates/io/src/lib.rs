@@ -19,6 +19,7 @@ pub mod metropro_dat_write;
 pub mod text;
 pub mod zygo_meta;
 pub mod zygo_text;
+pub mod zygo_xyz;
 
 use std::path::Path;
 
@@ -42,6 +43,7 @@ pub fn parse_bytes(bytes: &[u8], fmt: MapFormat) -> Result<Surface, ParseError> 
         MapFormat::MetroProDat => metropro_dat::parse(bytes),
         MapFormat::MetroProAsc => metropro_asc::parse(bytes),
         MapFormat::Datx => datx::parse(bytes),
+        MapFormat::ZygoXyz => zygo_xyz::parse(bytes),
         MapFormat::Csv => csv_grid::parse(bytes),
         MapFormat::Exr => exr_map::parse(bytes),
     }

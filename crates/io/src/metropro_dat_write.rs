@@ -73,7 +73,7 @@ pub fn encode(s: &Surface) -> Result<Vec<u8>, Unrepresentable> {
     let org = |o_mm: f64, d_mm: Option<f64>| -> i16 {
         let Some(d) = d_mm else { return 0 };
         let p = o_mm / d;
-        if p >= 0.0 && p <= 16384.0 && (p - p.round()).abs() < 1e-6 {
+        if (0.0..=16384.0).contains(&p) && (p - p.round()).abs() < 1e-6 {
             p.round() as i16
         } else {
             0

@@ -271,3 +271,61 @@ fn asc_equals_its_dat_twin_within_one_count() {
         }
     }
 }
+
+/// The XYZ layout of spec §4 (unverified against a real file): built here from a real .asc
+/// header and its phase data (X, Y in camera pixels incl. cn_org, Z in µm, `No Data`).
+#[test]
+fn xyz_built_from_a_real_asc_reads_the_same_map() {
+    let Some(dir) = real_dir() else { return };
+    let asc_path = dir.join("pyxsurf_171212_PCO2_Zygo_data.asc");
+    let asc = read_surface(&asc_path).unwrap();
+    let text = std::fs::read_to_string(&asc_path).unwrap();
+    let mut out: String = text.lines().take(15).collect::<Vec<_>>().join("\r\n");
+    out = out.replacen(
+        "Zygo ASCII Data File - Format 2",
+        "Zygo XYZ Data File - Format 1",
+        1,
+    );
+    out.push_str("\r\n");
+    let (rows, cols) = asc.dim();
+    let (ox, oy) = (59, 21); // line 4 of this file: cn_org 59 21
+    for i in 0..rows {
+        for j in 0..cols {
+            match asc.get(i, j) {
+                Some(h) => out.push_str(&format!("{} {} {:.9}\r\n", j + ox, i + oy, h / 1e3)),
+                None => out.push_str(&format!("{} {} No Data\r\n", j + ox, i + oy)),
+            }
+        }
+    }
+    out.push_str("#\r\n");
+    let d = tempfile::tempdir().unwrap();
+    let p = d.path().join("map.xyz");
+    std::fs::write(&p, out).unwrap();
+    let x = read_surface(&p).unwrap();
+    assert_eq!(x.provenance.format, "zygo-xyz");
+    assert_eq!(x.dim(), asc.dim());
+    assert_eq!(x.valid(), asc.valid());
+    assert_eq!(x.dx_mm, asc.dx_mm);
+    assert_eq!(x.origin_mm, asc.origin_mm);
+    let worst = x
+        .heights_nm()
+        .iter()
+        .zip(asc.heights_nm())
+        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+    assert!(worst < 1e-5, "{worst} nm");
+}
+
+/// A Windows (CRLF) copy of a real .asc reads identically.
+#[test]
+fn crlf_asc_reads_like_lf() {
+    let Some(dir) = real_dir() else { return };
+    let p = dir.join("pyxsurf_20191018_01c_flat01_difffiducials.asc");
+    let lf = read_surface(&p).unwrap();
+    let text = std::fs::read_to_string(&p).unwrap().replace('\n', "\r\n");
+    let d = tempfile::tempdir().unwrap();
+    let q = d.path().join("crlf.asc");
+    std::fs::write(&q, text).unwrap();
+    let crlf = read_surface(&q).unwrap();
+    assert_eq!(crlf.heights_nm(), lf.heights_nm());
+    assert_eq!(crlf.valid(), lf.valid());
+}
