@@ -5,6 +5,7 @@
 //! Units: stiffness N/mm, force N, mass kg, displacement mm, frequency Hz, angles in degrees at
 //! the API. Frames and every default are documented in [`params`].
 
+pub mod coupling;
 pub mod error;
 pub mod modal;
 pub mod params;
