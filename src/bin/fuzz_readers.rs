@@ -1,0 +1,699 @@
+//! Mutation fuzzer for every input reader (issue 8), run in-process.
+//!
+//! Seeds: the real Zygo files in shared/data/real, small maps generated here through our own
+//! writers (.dat, CSV, EXR) and by hand (.asc), a generated path log and a recipe TOML.
+//! Each input is a seed with 1-4 stacked mutations: bit flips, interesting bytes, truncation,
+//! chunk deletion / insertion / duplication, header-field overwrites (MetroPro offsets, or any
+//! aligned offset for HDF5 / EXR), numeric-token replacement and line edits for text formats,
+//! and appended bytes. Every input is reproducible from (seed, reader, iteration).
+//!
+//! Per input it records: a panic (caught with catch_unwind), a time over 1 s, an error message
+//! that is not one line, and allocation beyond the bound `ALLOC_PER_BYTE * len + ALLOC_SLACK`
+//! (peak live bytes, from the counting global allocator below; a single request over
+//! `HARD_CAP` is refused, which aborts after printing the input's coordinates). A watchdog
+//! stops the run if one input takes more than 30 s. Findings are saved to `--out`.
+//!
+//! Usage: fuzz_readers [--iterations N] [--seed S] [--reader NAME|all] [--out DIR]
+//!        [--replay ITER]
+//! Readers: dat asc datx csv exr detect path recipe.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use bonnetlab_io::{MapFormat, ParseError};
+use bonnetlab_surface::rng::Rng;
+use bonnetlab_surface::Surface;
+use ndarray::Array2;
+
+/// Allowed peak live bytes per input byte, plus a fixed slack (parsers build f64 heights and a
+/// mask: about 9 bytes per 4-byte pixel in .dat, far less per pixel in text).
+const ALLOC_PER_BYTE: usize = 32;
+const ALLOC_SLACK: usize = 64 << 20;
+/// A single allocation request above this is refused (the process then aborts).
+const HARD_CAP: usize = 4 << 30;
+const SLOW: Duration = Duration::from_secs(1);
+
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+static LARGEST: AtomicUsize = AtomicUsize::new(0);
+/// (reader index << 48) | iteration of the input being parsed, for abort and watchdog messages.
+static CURRENT: AtomicU64 = AtomicU64::new(u64::MAX);
+static STARTED_MS: AtomicU64 = AtomicU64::new(0);
+
+struct Counting;
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        if l.size() > HARD_CAP {
+            refuse(l.size());
+            return std::ptr::null_mut();
+        }
+        let p = unsafe { System.alloc(l) };
+        if !p.is_null() {
+            note_alloc(l.size());
+        }
+        p
+    }
+    unsafe fn alloc_zeroed(&self, l: Layout) -> *mut u8 {
+        if l.size() > HARD_CAP {
+            refuse(l.size());
+            return std::ptr::null_mut();
+        }
+        let p = unsafe { System.alloc_zeroed(l) };
+        if !p.is_null() {
+            note_alloc(l.size());
+        }
+        p
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        unsafe { System.dealloc(p, l) };
+        LIVE.fetch_sub(l.size(), Ordering::Relaxed);
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, new: usize) -> *mut u8 {
+        if new > HARD_CAP {
+            refuse(new);
+            return std::ptr::null_mut();
+        }
+        let q = unsafe { System.realloc(p, l, new) };
+        if !q.is_null() {
+            LIVE.fetch_sub(l.size(), Ordering::Relaxed);
+            note_alloc(new);
+        }
+        q
+    }
+}
+
+fn note_alloc(size: usize) {
+    let live = LIVE.fetch_add(size, Ordering::Relaxed) + size;
+    PEAK.fetch_max(live, Ordering::Relaxed);
+    LARGEST.fetch_max(size, Ordering::Relaxed);
+}
+
+/// Writes without allocating (we are inside the allocator).
+fn refuse(size: usize) {
+    use std::io::Write;
+    let cur = CURRENT.load(Ordering::Relaxed);
+    let mut buf = [0u8; 160];
+    let mut w = &mut buf[..];
+    let _ = writeln!(
+        w,
+        "FINDING alloc-refused: {size} bytes requested; reader {} iteration {}",
+        cur >> 48,
+        cur & 0xFFFF_FFFF_FFFF
+    );
+    let n = 160 - w.len();
+    let _ = std::io::stderr().write_all(&buf[..n]);
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Reader {
+    Dat,
+    Asc,
+    Datx,
+    Csv,
+    Exr,
+    Detect,
+    Path,
+    Recipe,
+}
+
+const ALL: [Reader; 8] = [
+    Reader::Dat,
+    Reader::Asc,
+    Reader::Datx,
+    Reader::Csv,
+    Reader::Exr,
+    Reader::Detect,
+    Reader::Path,
+    Reader::Recipe,
+];
+
+impl Reader {
+    fn name(self) -> &'static str {
+        match self {
+            Reader::Dat => "dat",
+            Reader::Asc => "asc",
+            Reader::Datx => "datx",
+            Reader::Csv => "csv",
+            Reader::Exr => "exr",
+            Reader::Detect => "detect",
+            Reader::Path => "path",
+            Reader::Recipe => "recipe",
+        }
+    }
+
+    fn is_text(self) -> bool {
+        matches!(
+            self,
+            Reader::Asc | Reader::Csv | Reader::Path | Reader::Recipe
+        )
+    }
+
+    /// Runs the reader; Err carries the error message.
+    fn run(self, bytes: &[u8]) -> Result<(), String> {
+        let map = |r: Result<Surface, ParseError>| r.map(check_surface).map_err(|e| e.to_string());
+        match self {
+            Reader::Dat => map(bonnetlab_io::parse_bytes(bytes, MapFormat::MetroProDat))?,
+            Reader::Asc => map(bonnetlab_io::parse_bytes(bytes, MapFormat::MetroProAsc))?,
+            Reader::Datx => map(bonnetlab_io::parse_bytes(bytes, MapFormat::Datx))?,
+            Reader::Csv => map(bonnetlab_io::parse_bytes(bytes, MapFormat::Csv))?,
+            Reader::Exr => map(bonnetlab_io::parse_bytes(bytes, MapFormat::Exr))?,
+            Reader::Detect => {
+                let f = bonnetlab_io::detect_format(bytes, Path::new("input.dat"))
+                    .map_err(|e| e.to_string())?;
+                map(bonnetlab_io::parse_bytes(bytes, f))?
+            }
+            Reader::Path => {
+                let p = bonnetlab_process::path::log::read_path_from(bytes, Path::new("path.csv"))
+                    .map_err(|e| e.to_string())?;
+                let finite = p
+                    .t_s
+                    .iter()
+                    .chain(&p.x_mm)
+                    .chain(&p.y_mm)
+                    .all(|v| v.is_finite());
+                if !finite {
+                    return Err("BUG: non-finite value accepted".into());
+                }
+            }
+            Reader::Recipe => {
+                let text = String::from_utf8_lossy(bytes);
+                bonnetlab_process::Recipe::parse(&text, Path::new("/nonexistent/recipe.toml"))
+                    .map_err(|e| e.to_string())?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Invariants a successfully read map must hold; a violation panics (and is recorded).
+fn check_surface(s: Surface) {
+    assert_eq!(s.heights_nm().dim(), s.valid().dim(), "mask shape");
+    assert!(
+        s.heights_nm().iter().all(|h| h.is_finite()),
+        "non-finite height"
+    );
+    for d in [s.dx_mm, s.dy_mm].into_iter().flatten() {
+        assert!(d.is_finite() && d > 0.0, "pixel size {d}");
+    }
+}
+
+fn seed_surface(rows: usize, cols: usize, holes: bool, px: Option<f64>) -> Surface {
+    let mut rng = Rng::new((rows * 1000 + cols) as u64);
+    let z = Array2::from_shape_fn((rows, cols), |_| {
+        if holes && rng.uniform() < 0.1 {
+            f64::NAN
+        } else {
+            100.0 * rng.normal()
+        }
+    });
+    Surface::new(z, px, px).expect("seed surface")
+}
+
+/// The real Zygo samples: `$BONNETLAB_REAL_DIR`, else shared/data/real beside the repository.
+fn real_dir() -> PathBuf {
+    std::env::var_os("BONNETLAB_REAL_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/real"))
+}
+
+fn real_files(ext: &str) -> Vec<Vec<u8>> {
+    let mut names: Vec<PathBuf> = std::fs::read_dir(real_dir())
+        .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
+        .unwrap_or_default();
+    names.sort();
+    names
+        .into_iter()
+        .filter(|p| p.extension().is_some_and(|e| e == ext))
+        .filter_map(|p| std::fs::read(p).ok())
+        .collect()
+}
+
+/// A small Zygo ASCII export (the real PCO2 header with a 6 x 4 phase window, no intensity).
+fn small_asc() -> Vec<u8> {
+    let mut s = String::from(
+        "Zygo ASCII Data File - Format 2\n1 8 1 1 \"Tue May 10 07:36:59 2005     \"\n0 0 0 0 0 0\n\
+         0 0 6 4\n\"part\"\n\"\"\n\"\"\n0 0.5 6.328e-007 0 1 0 0.000636653 1513096733\n\
+         320 240 4 0 65341 0 \"Sm Aperture\"\n0 0 1 2180 3 1 0.1 51.0067 17 50\n\
+         1 0 20 1 96.8896 0 0 0 0\n0 \"                           \"\n1 0\n\"None   \"\n#\n#\n",
+    );
+    for k in 0..24 {
+        s += &if k == 7 {
+            "2147483640".to_string()
+        } else {
+            format!("{}", k * 37 - 400)
+        };
+        s += if k % 10 == 9 { "\n" } else { " " };
+    }
+    s += "\n#\n";
+    s.into_bytes()
+}
+
+const RECIPE: &str = "[measurement]\nbefore = \"before.dat\"\nafter = \"after.dat\"\n\n\
+[tif]\nspot = \"spot.dat\"\ndwell_s = 30.0\n\n[path]\nlog = \"path.csv\"\npitch_mm = 3.0\n\n\
+[process]\nbonnet = \"original\"\nspindle_rpm = 1000.0\noffset_mm = 0.6\nprecession_deg = 20.0\n\
+inner_pressure_mpa = 0.25\n\n[vibration]\nstiffness_n_per_m = 1.0e6\n";
+
+const RECIPE_MODEL: &str = "[measurement]\nbefore = \"b.csv\"\nafter = \"a.csv\"\n[tif]\n\
+model = { kind = \"gaussian\", sigma_mm = 1.0, peak_rate_nm_per_s = 10.0, diameter_mm = 10.0 }\n\
+[path]\nlog = \"p.csv\"\n";
+
+/// Seeds per reader: (bytes, weight). Large real files get a small weight: they are slow.
+fn seeds(r: Reader) -> Vec<(Vec<u8>, u32)> {
+    let small = [
+        seed_surface(5, 7, true, Some(0.1)),
+        seed_surface(16, 9, false, None),
+        seed_surface(1, 1, false, Some(2.5)),
+    ];
+    let dat: Vec<Vec<u8>> = small
+        .iter()
+        .filter_map(|s| bonnetlab_io::metropro_dat_write::encode(s).ok())
+        .collect();
+    let csv: Vec<Vec<u8>> = small
+        .iter()
+        .map(|s| {
+            let mut v = Vec::new();
+            bonnetlab_io::csv_grid::write(s, &mut v).expect("in-memory write");
+            v
+        })
+        .collect();
+    let exr: Vec<Vec<u8>> = small
+        .iter()
+        .filter_map(|s| bonnetlab_io::exr_map::encode(s).ok())
+        .collect();
+    let path_csv = {
+        let n = 40;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.2).collect();
+        let x: Vec<f64> = (0..n).map(|k| (k % 10) as f64 * 1.5).collect();
+        let y: Vec<f64> = (0..n).map(|k| (k / 10) as f64 * 3.0).collect();
+        let p = bonnetlab_process::PathLog::new(t, x, y).expect("path");
+        bonnetlab_process::path::log::path_to_csv(&p).into_bytes()
+    };
+    let weighted = |v: Vec<Vec<u8>>, w: u32| v.into_iter().map(move |b| (b, w));
+    let big = |v: Vec<Vec<u8>>| {
+        v.into_iter().map(|b| {
+            let w = if b.len() > 1_000_000 { 1 } else { 4 };
+            (b, w)
+        })
+    };
+    let out: Vec<(Vec<u8>, u32)> = match r {
+        Reader::Dat => weighted(dat.clone(), 100)
+            .chain(big(real_files("dat")))
+            .collect(),
+        Reader::Asc => std::iter::once((small_asc(), 200))
+            .chain(big(real_files("asc")))
+            .collect(),
+        Reader::Datx => big(real_files("datx")).collect(),
+        Reader::Csv => weighted(csv.clone(), 100).collect(),
+        Reader::Exr => weighted(exr.clone(), 100).collect(),
+        Reader::Detect => weighted(dat, 50)
+            .chain(weighted(csv, 50))
+            .chain(weighted(exr, 50))
+            .chain(std::iter::once((small_asc(), 50)))
+            .chain(big(real_files("datx")))
+            .chain(big(real_files("dat")))
+            .collect(),
+        Reader::Path => vec![
+            (path_csv, 100),
+            (
+                b"x_mm,t_s,y_mm,extra\n1,0,2,a\n2,0.5,2,b\n3,1.0,2.5,c\n".to_vec(),
+                50,
+            ),
+        ],
+        Reader::Recipe => vec![
+            (RECIPE.as_bytes().to_vec(), 100),
+            (RECIPE_MODEL.as_bytes().to_vec(), 50),
+        ],
+    };
+    out
+}
+
+const INTERESTING_U32: [u32; 14] = [
+    0,
+    1,
+    2,
+    3,
+    4,
+    0x7F,
+    0x80,
+    0xFF,
+    0x7FFF,
+    0x8000,
+    0xFFFF,
+    60000,
+    0x7FFF_FFFF,
+    0xFFFF_FFFF,
+];
+const TOKENS: [&str; 16] = [
+    "0",
+    "-1",
+    "1",
+    "99999999999",
+    "1e308",
+    "-1e308",
+    "nan",
+    "NaN",
+    "inf",
+    "",
+    "60000",
+    "2147483640",
+    "-0",
+    "1.5",
+    "0x10",
+    "\"",
+];
+/// MetroPro header field offsets (spec/zygo-formats.md section 2.3).
+const DAT_FIELDS: [usize; 24] = [
+    4, 6, 48, 50, 52, 54, 56, 58, 60, 62, 64, 66, 68, 70, 72, 74, 164, 168, 176, 184, 218, 220,
+    222, 224,
+];
+
+fn mutate(r: Reader, data: &mut Vec<u8>, rng: &mut Rng) {
+    let n_mut = 1 + rng.below(4);
+    for _ in 0..n_mut {
+        let len = data.len();
+        let pos = |rng: &mut Rng, len: usize| {
+            if len == 0 {
+                0
+            } else if rng.uniform() < 0.5 {
+                rng.below(len.min(4096))
+            } else {
+                rng.below(len)
+            }
+        };
+        match rng.below(10) {
+            0 if len > 0 => {
+                let p = pos(rng, len);
+                data[p] ^= 1 << rng.below(8);
+            }
+            1 if len > 0 => {
+                let p = pos(rng, len);
+                data[p] = [0u8, 0xFF, 0x7F, 0x80, b'#', b'\n', b',', b'-'][rng.below(8)];
+            }
+            2 => data.truncate(rng.below(len + 1)),
+            3 if len > 1 => {
+                let a = pos(rng, len);
+                let n = 1 + rng.below(64.min(len - a).max(1));
+                data.drain(a..(a + n).min(len));
+            }
+            4 => {
+                let a = rng.below(len + 1);
+                let n = 1 + rng.below(64);
+                let ins: Vec<u8> = (0..n).map(|_| rng.below(256) as u8).collect();
+                data.splice(a..a, ins);
+            }
+            5 if len > 1 => {
+                let a = rng.below(len);
+                let n = 1 + rng.below(256.min(len - a));
+                let chunk = data[a..a + n].to_vec();
+                let b = rng.below(len + 1);
+                data.splice(b..b, chunk);
+            }
+            6 | 7 if !r.is_text() && len >= 4 => {
+                // Header-field overwrite: a MetroPro field or any 2-aligned offset.
+                let off = if matches!(r, Reader::Dat | Reader::Detect) && rng.uniform() < 0.7 {
+                    DAT_FIELDS[rng.below(DAT_FIELDS.len())]
+                } else {
+                    pos(rng, len) & !1
+                };
+                let v = if rng.uniform() < 0.8 {
+                    INTERESTING_U32[rng.below(INTERESTING_U32.len())]
+                } else {
+                    rng.next_u64() as u32
+                };
+                let width = if rng.uniform() < 0.5 { 2 } else { 4 };
+                let bytes = v.to_be_bytes();
+                for k in 0..width {
+                    if let Some(b) = data.get_mut(off + k) {
+                        *b = bytes[4 - width + k];
+                    }
+                }
+            }
+            6 | 7 => {
+                // Replace a numeric token with an interesting one.
+                let starts: Vec<usize> = (0..len)
+                    .filter(|&i| {
+                        data[i].is_ascii_digit() && (i == 0 || !data[i - 1].is_ascii_digit())
+                    })
+                    .collect();
+                if !starts.is_empty() {
+                    let a = starts[rng.below(starts.len())];
+                    let mut b = a;
+                    while b < len
+                        && (data[b].is_ascii_digit() || data[b] == b'.' || data[b] == b'e')
+                    {
+                        b += 1;
+                    }
+                    let tok = TOKENS[rng.below(TOKENS.len())].as_bytes().to_vec();
+                    data.splice(a..b, tok);
+                }
+            }
+            8 => {
+                // Line edits: delete, duplicate or swap lines.
+                let mut lines: Vec<Vec<u8>> =
+                    data.split(|&c| c == b'\n').map(<[u8]>::to_vec).collect();
+                let nl = lines.len();
+                let i = rng.below(nl);
+                match rng.below(3) {
+                    0 => {
+                        lines.remove(i);
+                    }
+                    1 => {
+                        let l = lines[i].clone();
+                        lines.insert(i, l);
+                    }
+                    _ => lines.swap(i, rng.below(nl)),
+                }
+                *data = lines.join(&b'\n');
+            }
+            _ => {
+                let n = 1 + rng.below(128);
+                data.extend((0..n).map(|_| rng.below(256) as u8));
+            }
+        }
+    }
+}
+
+#[derive(Default)]
+struct Tally {
+    inputs: u64,
+    ok: u64,
+    errors: u64,
+    panics: u64,
+    slow: u64,
+    multiline: u64,
+    over_alloc: u64,
+    max_time: Duration,
+    max_ratio: f64,
+    max_peak: usize,
+    elapsed: Duration,
+}
+
+static LAST_PANIC: Mutex<String> = Mutex::new(String::new());
+
+fn now_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+/// Findings saved per (reader, kind); later ones are only counted.
+const MAX_SAVED: usize = 20;
+static SAVED: Mutex<Vec<(&'static str, String, usize)>> = Mutex::new(Vec::new());
+
+fn save(out: &Path, r: Reader, iter: u64, kind: &str, bytes: &[u8], what: &str) {
+    if let Ok(mut saved) = SAVED.lock() {
+        let key = (r.name(), kind.to_string());
+        match saved
+            .iter_mut()
+            .find(|(a, b, _)| (*a, b.as_str()) == (key.0, key.1.as_str()))
+        {
+            Some(e) if e.2 >= MAX_SAVED => return,
+            Some(e) => e.2 += 1,
+            None => saved.push((key.0, key.1, 1)),
+        }
+    }
+    let _ = std::fs::create_dir_all(out);
+    let base = out.join(format!("{}-{iter}-{kind}", r.name()));
+    let _ = std::fs::write(base.with_extension("bin"), bytes);
+    let _ = std::fs::write(base.with_extension("txt"), what);
+    let shown: String = what
+        .replace(['\n', '\r'], "\\n")
+        .chars()
+        .take(300)
+        .collect();
+    println!(
+        "FINDING {kind}: reader {} iteration {iter}: {shown}",
+        r.name()
+    );
+}
+
+fn input_for(r: Reader, seeds: &[(Vec<u8>, u32)], total_w: u64, seed: u64, iter: u64) -> Vec<u8> {
+    let ri = ALL.iter().position(|&x| x == r).unwrap_or(0) as u64;
+    let mut rng = Rng::new(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (ri << 48) ^ iter);
+    let mut pick = (rng.next_u64() % total_w) as i64;
+    let mut data = Vec::new();
+    for (b, w) in seeds {
+        pick -= *w as i64;
+        if pick < 0 {
+            data = b.clone();
+            break;
+        }
+    }
+    mutate(r, &mut data, &mut rng);
+    data
+}
+
+fn fuzz(r: Reader, iterations: u64, seed: u64, out: &Path, replay: Option<u64>) -> Tally {
+    let seeds = seeds(r);
+    let total_w: u64 = seeds.iter().map(|(_, w)| *w as u64).sum::<u64>().max(1);
+    let ri = ALL.iter().position(|&x| x == r).unwrap_or(0) as u64;
+    let mut t = Tally::default();
+    let range = match replay {
+        Some(i) => i..i + 1,
+        None => 0..iterations,
+    };
+    let report_every = (iterations / 10).max(1);
+    let started = Instant::now();
+    for iter in range {
+        let data = input_for(r, &seeds, total_w, seed, iter);
+        CURRENT.store((ri << 48) | iter, Ordering::Relaxed);
+        let base = LIVE.load(Ordering::Relaxed);
+        PEAK.store(base, Ordering::Relaxed);
+        STARTED_MS.store(now_ms(), Ordering::Relaxed);
+        let t0 = Instant::now();
+        let res = catch_unwind(AssertUnwindSafe(|| r.run(&data)));
+        let dt = t0.elapsed();
+        STARTED_MS.store(0, Ordering::Relaxed);
+        let peak = PEAK.load(Ordering::Relaxed).saturating_sub(base);
+        t.inputs += 1;
+        t.max_time = t.max_time.max(dt);
+        t.max_peak = t.max_peak.max(peak);
+        if data.len() >= 4096 {
+            // Below 4 KiB the fixed slack dominates and the ratio says nothing.
+            t.max_ratio = t.max_ratio.max(peak as f64 / data.len() as f64);
+        }
+        match res {
+            Ok(Ok(())) => t.ok += 1,
+            Ok(Err(msg)) => {
+                t.errors += 1;
+                if msg.contains(['\n', '\r']) || msg.starts_with("BUG") {
+                    t.multiline += 1;
+                    save(out, r, iter, "error-message", &data, &msg);
+                }
+                if replay.is_some() {
+                    println!("error: {msg}");
+                }
+            }
+            Err(_) => {
+                t.panics += 1;
+                let msg = LAST_PANIC.lock().map(|m| m.clone()).unwrap_or_default();
+                save(out, r, iter, "panic", &data, &msg);
+            }
+        }
+        if dt > SLOW {
+            t.slow += 1;
+            save(
+                out,
+                r,
+                iter,
+                "slow",
+                &data,
+                &format!("{dt:?} for {} bytes", data.len()),
+            );
+        }
+        if peak > ALLOC_PER_BYTE * data.len() + ALLOC_SLACK {
+            t.over_alloc += 1;
+            save(
+                out,
+                r,
+                iter,
+                "alloc",
+                &data,
+                &format!("peak {peak} bytes for {} bytes", data.len()),
+            );
+        }
+        if replay.is_none() && (iter + 1) % report_every == 0 {
+            eprintln!("{}: {} / {iterations}", r.name(), iter + 1);
+        }
+    }
+    t.elapsed = started.elapsed();
+    t
+}
+
+fn main() {
+    let mut iterations = 10_000u64;
+    let mut seed = 1u64;
+    let mut which = "all".to_string();
+    let mut out = PathBuf::from("target/fuzz-findings");
+    let mut replay = None;
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut k = 0;
+    while k < args.len() {
+        let val = args.get(k + 1).cloned().unwrap_or_default();
+        match args[k].as_str() {
+            "--iterations" => iterations = val.parse().unwrap_or(iterations),
+            "--seed" => seed = val.parse().unwrap_or(seed),
+            "--reader" => which = val,
+            "--out" => out = PathBuf::from(val),
+            "--replay" => replay = val.parse().ok(),
+            other => {
+                eprintln!("fuzz_readers: unknown argument {other}");
+                std::process::exit(2);
+            }
+        }
+        k += 2;
+    }
+    std::panic::set_hook(Box::new(|info| {
+        if let Ok(mut m) = LAST_PANIC.lock() {
+            *m = info.to_string().replace('\n', " ");
+        }
+    }));
+    std::thread::spawn(|| loop {
+        std::thread::sleep(Duration::from_secs(1));
+        let s = STARTED_MS.load(Ordering::Relaxed);
+        if s != 0 && now_ms().saturating_sub(s) > 30_000 {
+            let cur = CURRENT.load(Ordering::Relaxed);
+            eprintln!(
+                "FINDING hang: reader {} iteration {} ran over 30 s",
+                cur >> 48,
+                cur & 0xFFFF_FFFF_FFFF
+            );
+            std::process::exit(3);
+        }
+    });
+    println!("| reader | inputs | ok | errors | panics | >1 s | multi-line errors | over alloc bound | max time | max peak alloc | max peak / input bytes (inputs >= 4 KiB) | wall time |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in ALL {
+        if which != "all" && which != r.name() {
+            continue;
+        }
+        let t = fuzz(r, iterations, seed, &out, replay);
+        println!(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {:.1} ms | {:.1} MiB | {:.1} | {:.0} s |",
+            r.name(),
+            t.inputs,
+            t.ok,
+            t.errors,
+            t.panics,
+            t.slow,
+            t.multiline,
+            t.over_alloc,
+            t.max_time.as_secs_f64() * 1e3,
+            t.max_peak as f64 / (1 << 20) as f64,
+            t.max_ratio,
+            t.elapsed.as_secs_f64()
+        );
+        println!(
+            "LARGEST single allocation so far: {} bytes",
+            LARGEST.load(Ordering::Relaxed)
+        );
+    }
+}
