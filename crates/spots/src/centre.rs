@@ -18,10 +18,11 @@ use crate::linalg::least_squares;
 pub const TOP_FRACTION: f64 = 0.85;
 
 /// How the centre and peak were found.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum CentreMethod {
     /// Vertex of the local paraboloid fit.
+    #[default]
     Paraboloid,
     /// Removal-weighted centroid; peak = smoothed maximum (the paraboloid was not concave).
     Centroid,

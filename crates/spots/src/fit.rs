@@ -53,7 +53,7 @@ pub struct FitStart {
 
 impl Default for FitStart {
     /// A 20 mm bonnet (the recipe example's), k = 0.05 nm/(MPa mm) (5e-14 m^2/N, the order of
-    /// bonnet polishing of SiC with diamond slurry), E = 2 MPa, gamma = 1.5.
+    /// bonnet polishing of SiC with diamond slurry), E = 2 MPa, gamma = 1 (parabolic).
     fn default() -> Self {
         FitStart {
             radius_mm: 20.0,

@@ -10,16 +10,23 @@
 pub mod background;
 pub mod centre;
 pub mod error;
+pub mod export;
 pub mod fit;
 pub mod generate;
 mod linalg;
+pub mod manifest;
 pub mod metrics;
 pub mod model;
 pub mod profile;
+pub mod sweep;
+pub mod trend;
 
 pub use background::MapKind;
 pub use error::SpotsError;
 pub use fit::{fit_model, FitStart, ModelFit, Observation};
 pub use generate::{generate_spot, SpotSpec};
+pub use manifest::{parse_manifest, read_manifest, Manifest, SpotEntry};
 pub use metrics::{measure_spot, SpotAnalysis, SpotMetrics, SpotOptions};
 pub use model::{BonnetModel, Factor, Factors, ModelMetrics};
+pub use sweep::{analyse_sweep, measure_entries, BonnetFit, SpotRecord, SweepReport};
+pub use trend::{Optimisation, Trend, TrendMetric};

@@ -42,7 +42,7 @@ pub struct SpotOptions {
 }
 
 /// The metrics of one spot. Lengths in mm, removal in nm, rates per second of dwell.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct SpotMetrics {
     pub dwell_s: f64,
     pub centre_x_mm: f64,

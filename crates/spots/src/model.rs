@@ -7,8 +7,11 @@
 //! - Contact pressure `p(r) = p0 (1 - r^2/a^2)^gamma` with peak
 //!   `p0 = p_inner + (2/pi) E a / R`: the inflation pressure plus a Hertz-like stiffness term with
 //!   a lumped effective contact modulus `E` (membrane, rubber and pad together; not a material
-//!   constant). `gamma = 1/2` is Hertz; the default `gamma = 1.5` stands for the pad and membrane
-//!   bending smoothing the edge, which gives the bell-shaped spots bonnets are known for.
+//!   constant). `gamma = 1/2` is Hertz; the default `gamma = 1` (parabolic) stands for the pad
+//!   and membrane bending smoothing the edge, which gives the bell-shaped spots bonnets are known
+//!   for. Both are profiles of `bonnetlab_process`'s bonnet TIF (`pressure = "hertz"` /
+//!   `"parabolic"`), whose geometry and speed field are the same as here, so a fitted model is
+//!   exported to a recipe's `[tif] model` without loss (checked by a test).
 //! - The spin axis is tilted by the precession angle `theta` (azimuth `phi`); the in-plane sliding
 //!   speed at contact point `r` is `omega cos(theta) |r - c_phi|`, where
 //!   `c_phi = -d tan(theta) (cos phi, sin phi)` is where the spin axis pierces the surface
@@ -26,7 +29,7 @@ use std::f64::consts::PI;
 use crate::error::SpotsError;
 
 /// Default pressure-profile exponent (see the module doc).
-pub const DEFAULT_PRESSURE_EXPONENT: f64 = 1.5;
+pub const DEFAULT_PRESSURE_EXPONENT: f64 = 1.0;
 
 /// The process settings of one spot: the four factors of the paper's single-factor sweeps.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
