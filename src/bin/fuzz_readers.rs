@@ -564,6 +564,11 @@ fn fuzz(r: Reader, iterations: u64, seed: u64, out: &Path, replay: Option<u64>) 
     let started = Instant::now();
     for iter in range {
         let data = input_for(r, &seeds, total_w, seed, iter);
+        if replay.is_some() {
+            // Saved before running, so an input that aborts the process is still kept.
+            let _ = std::fs::create_dir_all(out);
+            let _ = std::fs::write(out.join(format!("{}-{iter}-replay.bin", r.name())), &data);
+        }
         CURRENT.store((ri << 48) | iter, Ordering::Relaxed);
         let base = LIVE.load(Ordering::Relaxed);
         PEAK.store(base, Ordering::Relaxed);
