@@ -60,6 +60,9 @@ pub enum IoError {
         file: String,
         source: std::io::Error,
     },
+    /// The requested output format has no writer (a usage error).
+    #[error("{file}: {what}")]
+    Unsupported { file: String, what: String },
     /// The map cannot be represented in the requested output format.
     #[error("{file}: {what}")]
     Unrepresentable { file: String, what: String },

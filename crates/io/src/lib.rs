@@ -66,10 +66,13 @@ pub fn write_surface(path: &Path, s: &Surface, fmt: MapFormat) -> Result<(), IoE
         }
         MapFormat::Csv => atomic::write_atomic_with(path, |w| csv_grid::write(s, w)),
         other => {
-            return Err(unrep(format!(
-                "writing {} is not supported (write .dat, .csv or .exr)",
-                other.tag()
-            )))
+            return Err(IoError::Unsupported {
+                file: path.display().to_string(),
+                what: format!(
+                    "writing {} is not supported (write .dat, .csv or .exr)",
+                    other.tag()
+                ),
+            })
         }
     };
     result.map_err(|e| IoError::write(path, e))

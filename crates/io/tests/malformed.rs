@@ -338,3 +338,49 @@ fn bad_xyz() {
     y.push_str("\n59 21 0.5\n5000 21 0.1\n#\n");
     expect("o.xyz", y.as_bytes(), "outside the window", 2);
 }
+
+/// Seeded random corruptions (byte flips, truncations, header-field overwrites) of real files
+/// of every format: each parse returns Ok or Err, never panics.
+#[test]
+fn random_corruptions_never_panic() {
+    use bonnetlab_io::{detect_format, parse_bytes};
+    use bonnetlab_surface::rng::Rng;
+    let Some(dir) = common::real_dir() else {
+        return;
+    };
+    let mut rng = Rng::new(20_240_601);
+    let asc = std::fs::read(dir.join("pyxsurf_171212_PCO2_Zygo_data.asc")).unwrap();
+    let files = [
+        std::fs::read(dir.join(DAT3)).unwrap(),
+        std::fs::read(dir.join("monolithic_zygo_test.datx")).unwrap(),
+        asc[..asc.len().min(200_000)].to_vec(),
+    ];
+    let mut outcomes = [0usize; 2];
+    for base in &files {
+        for _ in 0..60 {
+            let mut b = base.clone();
+            match rng.below(3) {
+                0 => {
+                    for _ in 0..1 + rng.below(8) {
+                        let k = rng.below(b.len());
+                        b[k] = rng.below(256) as u8;
+                    }
+                }
+                1 => b.truncate(rng.below(b.len())),
+                _ => {
+                    // Overwrite a header-sized region start with random bytes.
+                    let k = rng.below(b.len().min(900));
+                    for x in b.iter_mut().skip(k).take(4) {
+                        *x = rng.below(256) as u8;
+                    }
+                }
+            }
+            let ok = detect_format(&b, Path::new("x"))
+                .and_then(|f| parse_bytes(&b, f))
+                .is_ok();
+            outcomes[usize::from(ok)] += 1;
+        }
+    }
+    // Both outcomes occur: corruptions inside the data block still read, header ones fail.
+    assert!(outcomes[0] > 0 && outcomes[1] > 0, "{outcomes:?}");
+}

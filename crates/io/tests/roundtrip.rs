@@ -227,4 +227,11 @@ fn format_is_detected_by_content_not_extension() {
         Some(MapFormat::MetroProDat)
     );
     assert_eq!(MapFormat::from_extension(Path::new("a/b.txt")), None);
+    let e = write_surface(&d.path().join("x.asc"), &s, MapFormat::MetroProAsc).unwrap_err();
+    assert_eq!(e.exit_code(), 2);
+    assert!(
+        e.to_string()
+            .contains("writing metropro-asc is not supported"),
+        "{e}"
+    );
 }
