@@ -15,7 +15,7 @@
 //!
 //! Usage: fuzz_readers [--iterations N] [--seed S] [--reader NAME|all] [--out DIR]
 //!        [--replay ITER]
-//! Readers: dat asc datx csv exr detect path recipe.
+//! Readers: dat asc xyz datx csv exr detect path recipe.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -116,6 +116,7 @@ static GLOBAL: Counting = Counting;
 enum Reader {
     Dat,
     Asc,
+    Xyz,
     Datx,
     Csv,
     Exr,
@@ -124,9 +125,10 @@ enum Reader {
     Recipe,
 }
 
-const ALL: [Reader; 8] = [
+const ALL: [Reader; 9] = [
     Reader::Dat,
     Reader::Asc,
+    Reader::Xyz,
     Reader::Datx,
     Reader::Csv,
     Reader::Exr,
@@ -140,6 +142,7 @@ impl Reader {
         match self {
             Reader::Dat => "dat",
             Reader::Asc => "asc",
+            Reader::Xyz => "xyz",
             Reader::Datx => "datx",
             Reader::Csv => "csv",
             Reader::Exr => "exr",
@@ -162,6 +165,7 @@ impl Reader {
         match self {
             Reader::Dat => map(bonnetlab_io::parse_bytes(bytes, MapFormat::MetroProDat))?,
             Reader::Asc => map(bonnetlab_io::parse_bytes(bytes, MapFormat::MetroProAsc))?,
+            Reader::Xyz => map(bonnetlab_io::parse_bytes(bytes, MapFormat::ZygoXyz))?,
             Reader::Datx => map(bonnetlab_io::parse_bytes(bytes, MapFormat::Datx))?,
             Reader::Csv => map(bonnetlab_io::parse_bytes(bytes, MapFormat::Csv))?,
             Reader::Exr => map(bonnetlab_io::parse_bytes(bytes, MapFormat::Exr))?,
@@ -256,6 +260,33 @@ fn small_asc() -> Vec<u8> {
     s.into_bytes()
 }
 
+/// A small Zygo XYZ export (spec section 4: the ASCII header, then `X Y Z` lines in camera
+/// pixels and micrometres, `No Data` for a missing point).
+fn small_xyz() -> Vec<u8> {
+    let mut s = String::from(
+        "Zygo XYZ Data File - Format 1\n1 8 1 1 \"Tue May 10 07:36:59 2005     \"\n0 0 0 0 0 0\n\
+         2 3 4 3\n\"part\"\n\"\"\n\"\"\n0 0.5 6.328e-007 0 1 0 0.000636653 1513096733\n\
+         320 240 4 0 65341 0 \"Sm Aperture\"\n0 0 1 2180 3 1 0.1 51.0067 17 50\n\
+         1 0 20 1 96.8896 0 0 0 0\n0 \"                           \"\n1 0\n\"None   \"\n#\n",
+    );
+    for row in 0..3 {
+        for col in 0..4 {
+            if (row, col) == (1, 2) {
+                s += &format!("{} {} No Data\n", col + 2, row + 3);
+            } else {
+                s += &format!(
+                    "{} {} {:.6}\n",
+                    col + 2,
+                    row + 3,
+                    0.01 * (row * 4 + col) as f64 - 0.05
+                );
+            }
+        }
+    }
+    s += "#\n";
+    s.into_bytes()
+}
+
 const RECIPE: &str = "[measurement]\nbefore = \"before.dat\"\nafter = \"after.dat\"\n\n\
 [tif]\nspot = \"spot.dat\"\ndwell_s = 30.0\n\n[path]\nlog = \"path.csv\"\npitch_mm = 3.0\n\n\
 [process]\nbonnet = \"original\"\nspindle_rpm = 1000.0\noffset_mm = 0.6\nprecession_deg = 20.0\n\
@@ -310,6 +341,7 @@ fn seeds(r: Reader) -> Vec<(Vec<u8>, u32)> {
         Reader::Asc => std::iter::once((small_asc(), 200))
             .chain(big(real_files("asc")))
             .collect(),
+        Reader::Xyz => vec![(small_xyz(), 100)],
         Reader::Datx => big(real_files("datx")).collect(),
         Reader::Csv => weighted(csv.clone(), 100).collect(),
         Reader::Exr => weighted(exr.clone(), 100).collect(),
@@ -317,6 +349,7 @@ fn seeds(r: Reader) -> Vec<(Vec<u8>, u32)> {
             .chain(weighted(csv, 50))
             .chain(weighted(exr, 50))
             .chain(std::iter::once((small_asc(), 50)))
+            .chain(std::iter::once((small_xyz(), 50)))
             .chain(big(real_files("datx")))
             .chain(big(real_files("dat")))
             .collect(),
