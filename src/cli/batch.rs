@@ -1,10 +1,189 @@
-//! `bonnetlab batch` (contract: shared/spec/interfaces.md).
+//! `bonnetlab batch (DIR | MANIFEST | MAP) [--pitch-mm P] [--remove TERMS] [--window W] [--jobs N]`:
+//! every map's height statistics (the `stats --json` object) and, with `--pitch-mm`, its
+//! `ripple` object (as in `psd`), one JSON line per map on stdout.
+//!
+//! - DIR: every file with a map extension (.dat, .datx, .asc, .xyz, .csv, .exr) directly in it,
+//!   sorted by name; MANIFEST: a text file with one map path per line (relative to the
+//!   manifest's directory; blank lines and `#` comments ignored); a single map file is a batch
+//!   of one, so a cluster scheduler can fan maps out one per task.
+//! - Output order is the input order whatever the parallelism; maps run in parallel (rayon,
+//!   `--jobs` threads), with a progress bar on stderr when stderr is a terminal.
+//! - A map that fails gives a line `{"file": ..., "error": ..., "exit_code": ...}`; the command
+//!   exits 1 at the end if any map failed.
 
+use std::path::{Path, PathBuf};
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use rayon::prelude::*;
+use serde_json::{json, Value};
+
+use super::stats::{read_map, stats_report};
 use super::CliError;
+use bonnetlab_spectrum::{psd_xy, ripple_from_psds, PsdOptions, RippleOptions, Window};
+use bonnetlab_surface::Term;
 
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// A directory of maps, a manifest (one map path per line), or a single map.
+    pub input: PathBuf,
+    /// Grating spacing in mm: adds each map's `ripple` object.
+    #[arg(long)]
+    pub pitch_mm: Option<f64>,
+    /// Form terms removed before the statistics and the PSD (comma list).
+    #[arg(long, default_value = "piston,tilt")]
+    pub remove: String,
+    /// PSD window for the ripple check.
+    #[arg(long, default_value = "hann")]
+    pub window: String,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+}
 
-pub fn run(_args: &Args) -> Result<(), CliError> {
-    Err(CliError::usage("'batch' is not available in this build yet"))
+/// Map file extensions recognised when scanning a directory.
+pub const MAP_EXTENSIONS: [&str; 6] = ["dat", "datx", "asc", "xyz", "csv", "exr"];
+
+fn is_map_file(p: &Path) -> bool {
+    p.extension()
+        .and_then(|e| e.to_str())
+        .map(|e| MAP_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+        .unwrap_or(false)
+}
+
+/// The maps named by the input, in a stable order.
+pub fn list_inputs(input: &Path) -> Result<Vec<PathBuf>, CliError> {
+    if input.is_dir() {
+        let rd = std::fs::read_dir(input)
+            .map_err(|e| CliError::input(input, format!("cannot list: {e}")))?;
+        let mut v: Vec<PathBuf> = rd
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_file() && is_map_file(p))
+            .collect();
+        v.sort();
+        if v.is_empty() {
+            return Err(CliError::input(
+                input,
+                "no map file (.dat, .datx, .asc, .xyz, .csv, .exr) in the directory",
+            ));
+        }
+        return Ok(v);
+    }
+    if is_map_file(input) {
+        return Ok(vec![input.to_path_buf()]);
+    }
+    let text = std::fs::read_to_string(input)
+        .map_err(|e| CliError::input(input, format!("cannot read the manifest: {e}")))?;
+    let base = input.parent().unwrap_or(Path::new(""));
+    let v: Vec<PathBuf> = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .map(|l| {
+            let p = PathBuf::from(l);
+            if p.is_absolute() {
+                p
+            } else {
+                base.join(p)
+            }
+        })
+        .collect();
+    if v.is_empty() {
+        return Err(CliError::input(input, "the manifest lists no map"));
+    }
+    Ok(v)
+}
+
+/// One map's JSON line (an `error` object when it fails).
+pub fn map_line(file: &Path, terms: &[Term], pitch_mm: Option<f64>, window: Window) -> Value {
+    let result = (|| -> Result<Value, CliError> {
+        let s = read_map(file)?;
+        let report = stats_report(file, &s, terms, false)?;
+        let mut v = serde_json::to_value(&report).map_err(|e| CliError::processing(file, e))?;
+        if let Some(p) = pitch_mm {
+            let opts = PsdOptions {
+                window,
+                remove: terms.to_vec(),
+                ..PsdOptions::default()
+            };
+            let (x, y) = psd_xy(&s, &opts).map_err(|e| CliError::input(file, e))?;
+            let r = ripple_from_psds(&x, &y, p, &RippleOptions::default())
+                .map_err(|e| CliError::input(file, e))?;
+            if let Value::Object(m) = &mut v {
+                m.insert("window".into(), json!(window.name()));
+                m.insert(
+                    "ripple".into(),
+                    serde_json::to_value(&r).map_err(|e| CliError::processing(file, e))?,
+                );
+            }
+        }
+        Ok(v)
+    })();
+    result.unwrap_or_else(
+        |e| json!({ "file": file.display().to_string(), "error": e.message, "exit_code": e.code }),
+    )
+}
+
+pub fn run(args: &Args) -> Result<(), CliError> {
+    let terms =
+        Term::parse_list(&args.remove).map_err(|e| CliError::usage(format!("--remove: {e}")))?;
+    let window =
+        Window::parse(&args.window, 0.5).map_err(|e| CliError::usage(format!("--window: {e}")))?;
+    if let Some(p) = args.pitch_mm {
+        if !(p.is_finite() && p > 0.0) {
+            return Err(CliError::usage(format!(
+                "--pitch-mm must be a positive number of mm, got {p}"
+            )));
+        }
+    }
+    if args.jobs == Some(0) {
+        return Err(CliError::usage("--jobs must be at least 1"));
+    }
+    let files = list_inputs(&args.input)?;
+    let bar = ProgressBar::with_draw_target(Some(files.len() as u64), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} [{bar:30}] {pos}/{len} maps {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let work = || -> Vec<Value> {
+        files
+            .par_iter()
+            .map(|f| {
+                let v = map_line(f, &terms, args.pitch_mm, window);
+                bar.inc(1);
+                v
+            })
+            .collect()
+    };
+    let lines = match args.jobs {
+        Some(n) => rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .map_err(|e| CliError::usage(format!("--jobs: {e}")))?
+            .install(work),
+        None => work(),
+    };
+    bar.finish_and_clear();
+    let mut out = std::io::stdout().lock();
+    let mut failed = 0;
+    for v in &lines {
+        if v.get("error").is_some() {
+            failed += 1;
+        }
+        use std::io::Write;
+        // A closed stdout (e.g. piped into `head`) ends the output quietly.
+        if writeln!(out, "{v}").is_err() {
+            break;
+        }
+    }
+    if failed > 0 {
+        return Err(CliError {
+            code: 1,
+            message: format!(
+                "{failed} of {} maps failed (their JSON lines carry the error)",
+                lines.len()
+            ),
+        });
+    }
+    Ok(())
 }

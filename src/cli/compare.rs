@@ -1,10 +1,99 @@
-//! `bonnetlab compare` (contract: shared/spec/interfaces.md).
+//! `bonnetlab compare` (contract: shared/spec/interfaces.md): before / after maps of one or
+//! more bonnet runs -> DIR/report.html, DIR/report.json and PSD CSVs.
+
+use std::path::{Path, PathBuf};
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use super::CliError;
+use crate::report::compare_report::write_report;
+use crate::report::comparison::{compare, CompareError, Comparison, RunSpec, Settings};
+use bonnetlab_spectrum::Window;
+use bonnetlab_surface::Term;
 
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// A run: NAME=BEFORE,AFTER; repeat measurements as NAME=B1+B2,A1+A2. The first run is
+    /// the reference for the improvement of the others.
+    #[arg(long = "run", value_name = "NAME=BEFORE,AFTER", required = true)]
+    pub runs: Vec<String>,
+    /// Grating (raster) spacing in mm: enables the ripple check and the f0 markers.
+    #[arg(long)]
+    pub pitch_mm: Option<f64>,
+    /// Form terms removed from every map before PV / RMS / PSD (comma list).
+    #[arg(long, default_value = "piston,tilt")]
+    pub remove: String,
+    /// PSD window: hann, none, tukey, blackman, welch.
+    #[arg(long, default_value = "hann")]
+    pub window: String,
+    /// Output directory (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+}
 
-pub fn run(_args: &Args) -> Result<(), CliError> {
-    Err(CliError::usage("'compare' is not available in this build yet"))
+/// Turns the command-line words into run specs and settings.
+pub fn parse(args: &Args) -> Result<(Vec<RunSpec>, Settings), CliError> {
+    let runs = args
+        .runs
+        .iter()
+        .map(|r| RunSpec::parse(r).map_err(|e| CliError::usage(format!("--run: {e}"))))
+        .collect::<Result<Vec<_>, _>>()?;
+    let remove =
+        Term::parse_list(&args.remove).map_err(|e| CliError::usage(format!("--remove: {e}")))?;
+    let window =
+        Window::parse(&args.window, 0.5).map_err(|e| CliError::usage(format!("--window: {e}")))?;
+    Ok((
+        runs,
+        Settings {
+            remove,
+            window,
+            pitch_mm: args.pitch_mm,
+            ..Settings::default()
+        },
+    ))
+}
+
+pub fn to_cli(e: CompareError) -> CliError {
+    CliError {
+        code: if e.bad_input { 2 } else { 1 },
+        message: e.to_string(),
+    }
+}
+
+/// Runs the comparison with a progress bar on stderr (hidden when stderr is not a terminal,
+/// in which case `announce` lines are printed instead when `verbose`).
+pub fn compare_with_progress(
+    runs: &[RunSpec],
+    settings: &Settings,
+    verbose: bool,
+) -> Result<Comparison, CliError> {
+    let n: usize = runs.iter().map(|r| r.before.len() + r.after.len()).sum();
+    let bar = ProgressBar::with_draw_target(Some(n as u64), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} analysing maps [{bar:30}] {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    let hidden = bar.is_hidden();
+    let step = |p: &Path| {
+        bar.inc(1);
+        bar.set_message(p.display().to_string());
+        if hidden && verbose {
+            eprintln!("bonnetlab: analysed {}", p.display());
+        }
+    };
+    let r = compare(runs, settings, &step).map_err(to_cli);
+    bar.finish_and_clear();
+    r
+}
+
+pub fn run(args: &Args) -> Result<(), CliError> {
+    let (runs, settings) = parse(args)?;
+    let c = compare_with_progress(&runs, &settings, false)?;
+    // An unwritable output is bad input (exit 2); the message already names the file.
+    write_report(&args.out, &c).map_err(|e| CliError {
+        code: 2,
+        message: e.to_string(),
+    })?;
+    Ok(())
 }

@@ -1,7 +1,11 @@
 //! Rendering result structs for people (HTML with inline plots) and pipelines (JSON, CSV).
 //! Nothing outside this module formats text for people.
 
+pub mod compare_report;
+pub mod comparison;
 pub mod font;
 pub mod html;
 pub mod maps;
 pub mod plot;
+pub mod samples;
+pub mod write;

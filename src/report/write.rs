@@ -1,0 +1,88 @@
+//! JSON and CSV output files, written whole or not at all through `bonnetlab_io::atomic`
+//! (temporary file in the same directory, then rename), so a pipeline never reads half a report.
+//!
+//! JSON is pretty-printed with a trailing newline; CSV has a header row and one row per
+//! sample, numbers in Rust's shortest round-trip form (so files are byte-stable across runs).
+
+use std::path::Path;
+
+use serde::Serialize;
+
+/// A write failure naming the file.
+#[derive(Debug, thiserror::Error)]
+#[error("{file}: cannot write: {what}")]
+pub struct WriteError {
+    pub file: String,
+    pub what: String,
+}
+
+fn werr(path: &Path, e: impl std::fmt::Display) -> WriteError {
+    WriteError {
+        file: path.display().to_string(),
+        what: e.to_string().replace('\n', " "),
+    }
+}
+
+/// Writes bytes atomically.
+pub fn bytes(path: &Path, data: &[u8]) -> Result<(), WriteError> {
+    bonnetlab_io::atomic::write_atomic(path, data).map_err(|e| werr(path, e))
+}
+
+/// Writes a value as pretty JSON, atomically.
+pub fn json<T: Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), WriteError> {
+    let mut text = serde_json::to_string_pretty(value).map_err(|e| werr(path, e))?;
+    text.push('\n');
+    bytes(path, text.as_bytes())
+}
+
+/// Writes columns of equal length as CSV (shorter columns leave empty cells), atomically.
+pub fn csv_columns(path: &Path, header: &[&str], columns: &[&[f64]]) -> Result<(), WriteError> {
+    let rows = columns.iter().map(|c| c.len()).max().unwrap_or(0);
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.write_record(header).map_err(|e| werr(path, e))?;
+    for i in 0..rows {
+        let rec: Vec<String> = columns
+            .iter()
+            .map(|c| c.get(i).map(|v| format!("{v}")).unwrap_or_default())
+            .collect();
+        w.write_record(&rec).map_err(|e| werr(path, e))?;
+    }
+    let data = w.into_inner().map_err(|e| werr(path, e))?;
+    bytes(path, &data)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn json_and_csv_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.json");
+        json(&p, &serde_json::json!({"x": 1.5, "y": [1, 2]})).unwrap();
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+        assert_eq!(v["x"], 1.5);
+        let c = dir.path().join("c.csv");
+        csv_columns(&c, &["f", "p"], &[&[0.0, 0.1, 0.2], &[1.0, 2.0]]).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(&c).unwrap(),
+            "f,p\n0,1\n0.1,2\n0.2,\n"
+        );
+        // No temporary file is left behind.
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names.len(), 2, "{names:?}");
+    }
+
+    #[test]
+    fn unwritable_target_is_an_error_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("missing_dir").join("x.json");
+        let e = json(&p, &1).unwrap_err();
+        assert!(e.to_string().contains("x.json"), "{e}");
+        assert!(!p.exists());
+    }
+}

@@ -1,0 +1,157 @@
+//! Opens the compare report in headless Chromium: takes a screenshot, checks it is not blank
+//! and that the page logged no console error. Skips (with a printed message) only when no
+//! Chromium binary exists; `.ci/run` installs Debian's `chromium`.
+//!
+//! A control page that throws proves the console-error detection can fail.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn find_browser() -> Option<PathBuf> {
+    let names = [
+        "chromium",
+        "chromium-browser",
+        "google-chrome",
+        "google-chrome-stable",
+    ];
+    let path = std::env::var_os("PATH")?;
+    for dir in std::env::split_paths(&path) {
+        for n in names {
+            let p = dir.join(n);
+            if p.is_file() {
+                return Some(p);
+            }
+        }
+    }
+    None
+}
+
+/// Runs headless Chromium on `html`, returns (screenshot PNG bytes, stderr log).
+fn screenshot(browser: &Path, html: &Path, work: &Path) -> (Vec<u8>, String) {
+    let png = work.join(format!(
+        "{}.png",
+        html.file_stem().unwrap().to_string_lossy()
+    ));
+    let profile = tempfile::tempdir().unwrap();
+    let url = format!("file://{}", html.canonicalize().unwrap().display());
+    let mut child = Command::new(browser)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--hide-scrollbars",
+            "--enable-logging=stderr",
+            "--v=0",
+            "--window-size=1280,2000",
+        ])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .arg(format!("--screenshot={}", png.display()))
+        .arg(&url)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start chromium");
+    let mut stderr = child.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        std::io::Read::read_to_string(&mut stderr, &mut s).ok();
+        s
+    });
+    let start = Instant::now();
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            break;
+        }
+        if start.elapsed() > Duration::from_secs(90) {
+            child.kill().ok();
+            child.wait().ok();
+            panic!("chromium did not finish within 90 s");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let log = reader.join().unwrap();
+    let bytes =
+        std::fs::read(&png).unwrap_or_else(|e| panic!("no screenshot ({e}); chromium log:\n{log}"));
+    (bytes, log)
+}
+
+/// Console errors the page itself produced (uncaught exceptions, console.error).
+fn console_errors(log: &str) -> Vec<&str> {
+    log.lines()
+        .filter(|l| l.contains("Uncaught") || l.contains("ERROR:CONSOLE"))
+        .collect()
+}
+
+/// Luminance variance and fraction of non-white pixels of a screenshot.
+fn picture_stats(png: &[u8]) -> (f64, f64) {
+    let img = image::load_from_memory(png).unwrap().to_rgb8();
+    let n = (img.width() * img.height()) as f64;
+    let lum: Vec<f64> = img
+        .pixels()
+        .map(|p| 0.299 * p[0] as f64 + 0.587 * p[1] as f64 + 0.114 * p[2] as f64)
+        .collect();
+    let mean = lum.iter().sum::<f64>() / n;
+    let var = lum.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / n;
+    let ink = lum.iter().filter(|&&l| l < 200.0).count() as f64 / n;
+    (var, ink)
+}
+
+#[test]
+fn compare_report_renders_in_chromium_without_console_errors() {
+    let Some(browser) = find_browser() else {
+        println!(
+            "SKIPPED browser_report: no chromium binary on PATH (install Debian's `chromium`)"
+        );
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let samples = dir.path().join("samples");
+    let report = dir.path().join("report");
+    let o = Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
+        .args(["demo", "--repeats", "1", "--generate-samples"])
+        .arg(&samples)
+        .arg("--out")
+        .arg(&report)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let html = report.join("report.html");
+
+    // Control: a page that throws must be caught by the console check.
+    let bad = dir.path().join("bad.html");
+    std::fs::write(&bad, "<!DOCTYPE html><html><body><p>x</p><script>throw new Error('boom-control')</script></body></html>")
+        .unwrap();
+    let (_, bad_log) = screenshot(&browser, &bad, dir.path());
+    assert!(
+        !console_errors(&bad_log).is_empty(),
+        "the console check misses a thrown error; log:\n{bad_log}"
+    );
+
+    let (png, log) = screenshot(&browser, &html, dir.path());
+    let errors = console_errors(&log);
+    assert!(
+        errors.is_empty(),
+        "console errors from the report:\n{}",
+        errors.join("\n")
+    );
+    let (var, ink) = picture_stats(&png);
+    // A blank (all white) page has variance 0 and no ink; the report's maps and tables give
+    // both in quantity.
+    assert!(
+        var > 500.0,
+        "screenshot looks blank: luminance variance {var:.1}"
+    );
+    assert!(
+        ink > 0.05,
+        "screenshot looks blank: only {:.1} % dark pixels",
+        100.0 * ink
+    );
+    let img = image::load_from_memory(&png).unwrap();
+    assert_eq!(img.width(), 1280);
+}
