@@ -70,6 +70,18 @@ impl Fft2 {
         (self.n0, self.n1)
     }
 
+    /// Weight of spectrum element `idx` in a Parseval sum over the half spectrum: 1 for the
+    /// zero (and, for even n1, the Nyquist) column frequency, 2 for the others, whose conjugate
+    /// twins are not stored.
+    pub fn parseval_weight(&self, idx: usize) -> f64 {
+        let k1 = idx / self.n0;
+        if k1 == 0 || (self.n1.is_multiple_of(2) && k1 == self.nh - 1) {
+            1.0
+        } else {
+            2.0
+        }
+    }
+
     /// Length of a (transposed) half spectrum.
     pub fn spectrum_len(&self) -> usize {
         self.nh * self.n0
@@ -111,7 +123,7 @@ impl Fft2 {
                 let mut scratch = self.c2r.make_scratch_vec();
                 for (c, r) in cin.chunks_mut(nh).zip(rout.chunks_mut(n1)) {
                     c[0].im = 0.0;
-                    if n1 % 2 == 0 {
+                    if n1.is_multiple_of(2) {
                         c[nh - 1].im = 0.0;
                     }
                     let _ = self.c2r.process_with_scratch(c, r, &mut scratch);
@@ -215,6 +227,11 @@ impl Convolver {
     /// Input shape this convolver takes.
     pub fn shape(&self) -> (usize, usize) {
         (self.rows, self.cols)
+    }
+
+    /// The transform itself (for solvers that stay in the frequency domain).
+    pub fn fft(&self) -> &Fft2 {
+        &self.fft
     }
 
     /// The transform size.
