@@ -13,6 +13,7 @@
 pub mod band;
 pub mod convert;
 pub mod error;
+pub mod form;
 pub mod limit;
 mod lines;
 pub mod psd1d;
@@ -23,6 +24,7 @@ pub mod window;
 pub use band::{band, band_power, band_rms, BandRms, MSF_DEFAULT_PER_MM};
 pub use convert::{to_gwyddion_w1, to_surfacetopography_c1d, ConvertedPsd};
 pub use error::SpectrumError;
+pub use form::remove_form;
 pub use limit::{check_limit, LimitCheck, LimitLine};
 pub use lines::{Axis, Detrend};
 pub use psd1d::{band_rms_profile, line_psd, psd_x, psd_xy, psd_y, Psd1d, PsdOptions};

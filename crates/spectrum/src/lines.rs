@@ -24,6 +24,7 @@ use rayon::prelude::*;
 use realfft::num_complex::Complex;
 use realfft::{RealFftPlanner, RealToComplex};
 
+use crate::form::PlaneModel;
 use crate::window::Window;
 
 /// Which direction the lines run.
@@ -162,10 +163,8 @@ impl LineWorker {
         let mut power = std::mem::take(&mut self.power_buf);
         let mut used = false;
         if valid.iter().all(|&v| v) {
-            self.z.copy_from_slice(z);
-            self.ok.fill(true);
             if n >= self.rules.min_len {
-                self.transform_segment(0, n, &mut power);
+                self.transform_segment(z, &mut power);
                 f(&power, n as f64);
                 used = true;
             }
@@ -185,7 +184,9 @@ impl LineWorker {
                 }
                 let m = i - start;
                 if m >= self.rules.min_len && m >= 2 {
-                    self.transform_segment(start, m, &mut power);
+                    let filled = std::mem::take(&mut self.z);
+                    self.transform_segment(&filled[start..start + m], &mut power);
+                    self.z = filled;
                     f(&power, m as f64);
                     used = true;
                 }
@@ -195,11 +196,11 @@ impl LineWorker {
         used
     }
 
-    /// Detrends, windows, zero-pads and transforms self.z[start..start+m]; writes
-    /// |Z_k|^2 / sum(w^2) into `power` (N/2 + 1 values).
-    fn transform_segment(&mut self, start: usize, m: usize, power: &mut Vec<f64>) {
+    /// Detrends, windows, zero-pads and transforms one segment; writes |Z_k|^2 / sum(w^2)
+    /// into `power` (N/2 + 1 values).
+    fn transform_segment(&mut self, seg: &[f64], power: &mut Vec<f64>) {
         let n = self.n;
-        let seg = &self.z[start..start + m];
+        let m = seg.len();
         let (a, b) = trend(seg, self.rules.detrend);
         let mut wbuf = Vec::new();
         let (w, energy): (&[f64], f64) = if m == n {
@@ -211,8 +212,14 @@ impl LineWorker {
         };
         // Centred abscissa so the linear fit is well conditioned; `trend` uses the same.
         let c = 0.5 * (m as f64 - 1.0);
-        for (k, ((dst, &zv), &wv)) in self.input.iter_mut().zip(seg).zip(w).enumerate() {
-            *dst = (zv - a - b * (k as f64 - c)) * wv;
+        if b == 0.0 {
+            for ((dst, &zv), &wv) in self.input.iter_mut().zip(seg).zip(w) {
+                *dst = (zv - a) * wv;
+            }
+        } else {
+            for (k, ((dst, &zv), &wv)) in self.input.iter_mut().zip(seg).zip(w).enumerate() {
+                *dst = (zv - a - b * (k as f64 - c)) * wv;
+            }
         }
         self.input[m..].fill(0.0);
         // Lengths match by construction (buffers come from the plan), so this cannot fail.
@@ -285,6 +292,7 @@ pub(crate) fn sum_lines(
     valid: ArrayView2<bool>,
     axis: Axis,
     rules: LineRules,
+    model: Option<&PlaneModel>,
 ) -> LineSums {
     let (rows, cols) = heights.dim();
     let (n, n_lines) = match axis {
@@ -301,7 +309,7 @@ pub(crate) fn sum_lines(
             |(worker, block), &c| {
                 let first = c * CHUNK_LINES;
                 let count = CHUNK_LINES.min(n_lines - first);
-                block.load(heights, valid, axis, first, count);
+                block.load(heights, valid, axis, first, count, model);
                 let mut acc = LineSums::new(nbins);
                 for l in 0..count {
                     let (z, v) = block.line(l);
@@ -325,6 +333,7 @@ pub(crate) fn map_lines<T: Send>(
     valid: ArrayView2<bool>,
     axis: Axis,
     rules: LineRules,
+    model: Option<&PlaneModel>,
     f: impl Fn(&LineSums) -> T + Sync,
 ) -> Vec<T> {
     let (rows, cols) = heights.dim();
@@ -342,7 +351,7 @@ pub(crate) fn map_lines<T: Send>(
             |(worker, block), &c| {
                 let first = c * CHUNK_LINES;
                 let count = CHUNK_LINES.min(n_lines - first);
-                block.load(heights, valid, axis, first, count);
+                block.load(heights, valid, axis, first, count, model);
                 (0..count)
                     .map(|l| {
                         let (z, v) = block.line(l);
@@ -364,6 +373,8 @@ struct Block {
     n: usize,
     z: Vec<f64>,
     v: Vec<bool>,
+    /// Model values of the current row (X) or of the block's columns in one row (Y).
+    m: Vec<f64>,
 }
 
 impl Block {
@@ -372,6 +383,7 @@ impl Block {
             n,
             z: vec![0.0; n * CHUNK_LINES],
             v: vec![false; n * CHUNK_LINES],
+            m: vec![0.0; n.max(CHUNK_LINES)],
         }
     }
 
@@ -382,6 +394,7 @@ impl Block {
         axis: Axis,
         first: usize,
         count: usize,
+        model: Option<&PlaneModel>,
     ) {
         let n = self.n;
         match axis {
@@ -389,8 +402,17 @@ impl Block {
                 for l in 0..count {
                     let hz = heights.row(first + l);
                     let hv = valid.row(first + l);
-                    for (d, s) in self.z[l * n..(l + 1) * n].iter_mut().zip(hz.iter()) {
-                        *d = *s;
+                    let m = &mut self.m[..n];
+                    match model {
+                        Some(md) => md.row(first + l, m),
+                        None => m.fill(0.0),
+                    }
+                    for ((d, s), mv) in self.z[l * n..(l + 1) * n]
+                        .iter_mut()
+                        .zip(hz.iter())
+                        .zip(m.iter())
+                    {
+                        *d = *s - *mv;
                     }
                     for (d, s) in self.v[l * n..(l + 1) * n].iter_mut().zip(hv.iter()) {
                         *d = *s;
@@ -398,12 +420,28 @@ impl Block {
                 }
             }
             Axis::Y => {
-                for i in 0..n {
-                    let hz = heights.row(i);
-                    let hv = valid.row(i);
+                // Tiles of TILE rows x `count` columns: the reads of a tile stay in L1 and
+                // every line's writes are contiguous runs of TILE values.
+                const TILE: usize = 32;
+                let mut mt = [[0.0f64; CHUNK_LINES]; TILE];
+                for i0 in (0..n).step_by(TILE) {
+                    let i1 = (i0 + TILE).min(n);
+                    for (t, i) in (i0..i1).enumerate() {
+                        let m = &mut mt[t][..count];
+                        match model {
+                            Some(md) => md.row_from(i, first, m),
+                            None => m.fill(0.0),
+                        }
+                    }
                     for l in 0..count {
-                        self.z[l * n + i] = hz[first + l];
-                        self.v[l * n + i] = hv[first + l];
+                        let zl = &mut self.z[l * n + i0..l * n + i1];
+                        for (t, d) in zl.iter_mut().enumerate() {
+                            *d = heights[(i0 + t, first + l)] - mt[t][l];
+                        }
+                        let vl = &mut self.v[l * n + i0..l * n + i1];
+                        for (t, d) in vl.iter_mut().enumerate() {
+                            *d = valid[(i0 + t, first + l)];
+                        }
                     }
                 }
             }
@@ -459,10 +497,10 @@ mod tests {
             max_gap_px: 2,
             min_len: 8,
         };
-        let a = sum_lines(h.view(), v.view(), Axis::Y, rules);
+        let a = sum_lines(h.view(), v.view(), Axis::Y, rules, None);
         let ht = h.t().to_owned();
         let vt = v.t().to_owned();
-        let b = sum_lines(ht.view(), vt.view(), Axis::X, rules);
+        let b = sum_lines(ht.view(), vt.view(), Axis::X, rules, None);
         assert_eq!(a.power, b.power);
         assert_eq!(a.weight, b.weight);
     }

@@ -7,10 +7,11 @@
 //! `lines`). Global form removal (`PsdOptions::remove`) runs once before any line is cut.
 //! The lowest `biased_bins` bins are biased low by the detrending and should not be read.
 
-use bonnetlab_surface::{remove_terms, Surface, Term};
+use bonnetlab_surface::{Surface, Term};
 use serde::Serialize;
 
 use crate::error::SpectrumError;
+use crate::form::{prepare, PlaneModel};
 use crate::lines::{map_lines, sum_lines, Axis, Detrend, LineRules, LineSums};
 use crate::window::Window;
 
@@ -110,19 +111,6 @@ impl Psd1d {
     }
 }
 
-/// Removes the requested form terms (a no-op copy when none are requested).
-pub(crate) fn prepared(s: &Surface, opts: &PsdOptions) -> Result<Surface, SpectrumError> {
-    if s.valid_count() == 0 {
-        return Err(SpectrumError::Surface(
-            bonnetlab_surface::SurfaceError::NoValidPixel,
-        ));
-    }
-    if opts.remove.is_empty() {
-        return Ok(s.clone());
-    }
-    Ok(remove_terms(s, &opts.remove)?.0)
-}
-
 /// Sample spacing and line length along an axis.
 fn geometry(s: &Surface, axis: Axis) -> Result<(f64, usize), SpectrumError> {
     let (dx, dy) = s.pixel_mm("a PSD")?;
@@ -175,32 +163,57 @@ fn finish(
 
 /// PSD along `axis` of a surface whose form has already been removed (no removal here).
 pub fn line_psd(s: &Surface, axis: Axis, opts: &PsdOptions) -> Result<Psd1d, SpectrumError> {
+    along(s, None, axis, opts, s.removed.clone())
+}
+
+fn along(
+    s: &Surface,
+    model: Option<&PlaneModel>,
+    axis: Axis,
+    opts: &PsdOptions,
+    removed: Vec<Term>,
+) -> Result<Psd1d, SpectrumError> {
     let (d, n) = geometry(s, axis)?;
     let rules = opts.rules(n)?;
-    let sums = sum_lines(s.heights_nm().view(), s.valid().view(), axis, rules);
+    let sums = sum_lines(s.heights_nm().view(), s.valid().view(), axis, rules, model);
     if sums.n_segments == 0 {
         return Err(SpectrumError::NoUsableLine {
             axis: axis.name(),
             min_len: rules.min_len,
         });
     }
-    Ok(finish(&sums, n, d, axis, opts, s.removed.clone()))
+    Ok(finish(&sums, n, d, axis, opts, removed))
+}
+
+fn prepared_along(s: &Surface, axis: Axis, opts: &PsdOptions) -> Result<Psd1d, SpectrumError> {
+    geometry(s, axis)?;
+    let p = prepare(s, &opts.remove)?;
+    along(&p.surface, p.model.as_ref(), axis, opts, p.removed)
 }
 
 /// One-sided PSD along X (each row a line), nm^2 mm.
 pub fn psd_x(s: &Surface, opts: &PsdOptions) -> Result<Psd1d, SpectrumError> {
-    line_psd(&prepared(s, opts)?, Axis::X, opts)
+    prepared_along(s, Axis::X, opts)
 }
 
 /// One-sided PSD along Y (each column a line, the raster feed direction), nm^2 mm.
 pub fn psd_y(s: &Surface, opts: &PsdOptions) -> Result<Psd1d, SpectrumError> {
-    line_psd(&prepared(s, opts)?, Axis::Y, opts)
+    prepared_along(s, Axis::Y, opts)
 }
 
-/// Both PSDs with a single form removal.
+/// Both PSDs with a single form fit.
 pub fn psd_xy(s: &Surface, opts: &PsdOptions) -> Result<(Psd1d, Psd1d), SpectrumError> {
-    let p = prepared(s, opts)?;
-    Ok((line_psd(&p, Axis::X, opts)?, line_psd(&p, Axis::Y, opts)?))
+    s.pixel_mm("a PSD")?;
+    let p = prepare(s, &opts.remove)?;
+    let x = along(
+        &p.surface,
+        p.model.as_ref(),
+        Axis::X,
+        opts,
+        p.removed.clone(),
+    )?;
+    let y = along(&p.surface, p.model.as_ref(), Axis::Y, opts, p.removed)?;
+    Ok((x, y))
 }
 
 /// Band RMS in [f1, f2] mm^-1 of every line along `axis` (rows for X, columns for Y), from
@@ -213,14 +226,15 @@ pub fn band_rms_profile(
     opts: &PsdOptions,
 ) -> Result<Vec<Option<f64>>, SpectrumError> {
     crate::band::check_band(f1_per_mm, f2_per_mm)?;
-    let p = prepared(s, opts)?;
-    let (d, n) = geometry(&p, axis)?;
+    let (d, n) = geometry(s, axis)?;
+    let p = prepare(s, &opts.remove)?;
     let rules = opts.rules(n)?;
     Ok(map_lines(
-        p.heights_nm().view(),
-        p.valid().view(),
+        p.surface.heights_nm().view(),
+        p.surface.valid().view(),
         axis,
         rules,
+        p.model.as_ref(),
         |sums| {
             if sums.n_segments == 0 {
                 return None;

@@ -22,8 +22,9 @@ use serde::Serialize;
 use bonnetlab_surface::{Surface, Term};
 
 use crate::error::SpectrumError;
+use crate::form::prepare;
 use crate::lines::Axis;
-use crate::psd1d::{prepared, Psd1d, PsdOptions};
+use crate::psd1d::{Psd1d, PsdOptions};
 use crate::window::Window;
 
 /// A two-sided 2-D PSD on the half plane kx >= 0.
@@ -210,17 +211,20 @@ impl Psd2d {
 pub fn psd_2d(s: &Surface, opts: &PsdOptions) -> Result<Psd2d, SpectrumError> {
     opts.window.validate()?;
     let (dx, dy) = s.pixel_mm("a 2-D PSD")?;
-    let p = prepared(s, opts)?;
-    let (ny, nx) = p.dim();
+    let p = prepare(s, &opts.remove)?;
+    let model = p.model.as_ref();
+    let (ny, nx) = p.surface.dim();
     if nx < 2 || ny < 2 {
         return Err(SpectrumError::TooSmall(format!(
             "{ny} x {nx} map (at least 2 x 2 needed)"
         )));
     }
-    let h = p.heights_nm();
-    let v = p.valid();
-    let n_valid = p.valid_count() as f64;
-    let mean = p.valid_heights().sum::<f64>() / n_valid;
+    let h = p.surface.heights_nm();
+    let v = p.surface.valid();
+    let mean = match model {
+        Some(m) => m.residual_mean,
+        None => p.surface.valid_heights().sum::<f64>() / p.surface.valid_count() as f64,
+    };
     let wx = opts.window.coefficients(nx);
     let wy = opts.window.coefficients(ny);
     let mut energy = 0.0;
@@ -241,14 +245,24 @@ pub fn psd_2d(s: &Surface, opts: &PsdOptions) -> Result<Psd2d, SpectrumError> {
     let rplan = RealFftPlanner::<f64>::new().plan_fft_forward(nx);
     let mut spec = vec![Complex::new(0.0, 0.0); ny * nh];
     spec.par_chunks_mut(nh).enumerate().for_each_init(
-        || (rplan.make_input_vec(), rplan.make_scratch_vec()),
-        |(input, scratch), (i, out)| {
-            for (j, dst) in input.iter_mut().enumerate() {
-                *dst = if v[(i, j)] {
-                    (h[(i, j)] - mean) * wy[i] * wx[j]
-                } else {
-                    0.0
-                };
+        || {
+            (
+                rplan.make_input_vec(),
+                rplan.make_scratch_vec(),
+                vec![0.0; nx],
+            )
+        },
+        |(input, scratch, mrow), (i, out)| {
+            match model {
+                Some(m) => m.row(i, mrow),
+                None => mrow.fill(0.0),
+            }
+            let (hz, hv) = (h.row(i), v.row(i));
+            let wyi = wy[i];
+            for ((((dst, &z), &ok), &mv), &wxj) in
+                input.iter_mut().zip(hz).zip(hv).zip(mrow.iter()).zip(&wx)
+            {
+                *dst = if ok { (z - mv - mean) * wyi * wxj } else { 0.0 };
             }
             let _ = rplan.process_with_scratch(input, out, scratch);
         },
@@ -292,7 +306,7 @@ pub fn psd_2d(s: &Surface, opts: &PsdOptions) -> Result<Psd2d, SpectrumError> {
         dfx_per_mm: 1.0 / (nx as f64 * dx),
         dfy_per_mm: 1.0 / (ny as f64 * dy),
         window: opts.window,
-        removed: p.removed.clone(),
+        removed: p.removed,
     })
 }
 

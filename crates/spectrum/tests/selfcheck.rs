@@ -240,7 +240,7 @@ fn radial_integral_equals_mean_square_and_forms_are_consistent() {
     let h = s.heights_nm();
     let m = h.mean().unwrap();
     let ms = h.iter().map(|v| (v - m).powi(2)).sum::<f64>() / h.len() as f64;
-    assert!((integral / ms - 1.0).abs() < 1e-12);
+    assert!((integral / ms - 1.0).abs() < 1e-12, "{integral} vs {ms}");
     let npix: usize = rad.counts.iter().sum();
     assert_eq!(npix, 300 * 500);
     // integrated = average * count * dfx dfy / dfr, bin by bin.
