@@ -24,9 +24,10 @@ pub fn has_magic(bytes: &[u8]) -> bool {
     bytes.starts_with(&EXR_MAGIC)
 }
 
-/// Largest pixel count accepted per byte of file: ZIP tops out near 1000:1 on 4-byte samples,
-/// so anything beyond this ratio is a corrupt header, refused before `exr` allocates.
-const MAX_PIXELS_PER_BYTE: usize = 300;
+/// Largest pixel count accepted per byte of file: deflate tops out near 1032:1, i.e. 516 f16
+/// or 258 f32 pixels per byte; anything far beyond is a corrupt header, refused before `exr`
+/// allocates.
+const MAX_PIXELS_PER_BYTE: usize = 1100;
 
 /// Reads an EXR height map.
 pub fn parse(bytes: &[u8]) -> std::result::Result<Surface, ParseError> {

@@ -102,6 +102,11 @@ impl ZygoMeta {
         if let Some(d) = non_empty(&self.swinfo_date) {
             software.push_str(&format!(" (build {d})"));
         }
+        // Type 0 with no version is what non-Zygo writers (bonnetlab included) leave.
+        let software = (self.swinfo_type != 0
+            || self.version != (0, 0, 0)
+            || !self.swinfo_date.trim().is_empty())
+        .then_some(software);
         // System type names as in Gwyddion's table; real NewView files carry values beyond it.
         let sys_name = match self.sys_type {
             0 => Some("software"),
@@ -144,7 +149,7 @@ impl ZygoMeta {
             objective,
             date: (self.time_stamp > 0).then(|| unix_to_iso8601(self.time_stamp)),
             comment: (!comment_parts.is_empty()).then(|| comment_parts.join("; ")),
-            software: Some(software),
+            software,
         }
     }
 }
