@@ -208,7 +208,19 @@ impl Problem {
             }
         }
         let (hr, hc, dx, dy) = (self.conv.hr, self.conv.hc, self.grid.dx_mm, self.grid.dy_mm);
-        let k = self.tif.kernel(dx, dy, hr, hc, scale);
+        let k0 = self.tif.kernel(dx, dy, hr, hc, scale);
+        // Bilinear splatting convolves the dwell with a tent of variance d^2 / 6 per axis, which
+        // widens the effective spot; pre-compensate to second order: K - (d^2 / 12) d2K/dx2 - ...
+        let (r, c) = k0.dim();
+        let at = |i: isize, j: isize| -> f64 {
+            if i < 0 || j < 0 || i as usize >= r || j as usize >= c { 0.0 } else { k0[(i as usize, j as usize)] }
+        };
+        let k = Array2::from_shape_fn((r, c), |(i, j)| {
+            let (i, j) = (i as isize, j as isize);
+            let kxx = at(i, j + 1) - 2.0 * at(i, j) + at(i, j - 1);
+            let kyy = at(i + 1, j) - 2.0 * at(i, j) + at(i - 1, j);
+            at(i, j) - (kxx + kyy) / 12.0
+        });
         let (gx, gy) = kernel_gradient(&k, dx, dy);
         // dK/ds of K(x / s) = -(1 / s) (x . grad K)
         let ks = Array2::from_shape_fn(k.dim(), |(a, b)| {

@@ -231,11 +231,16 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                 .map(|(c, s)| CandidateScore { key: c.key.clone(), z: s.z, heldout_reduction_fraction: s.fraction })
                 .collect(),
         };
+        // Parsimony: among significant candidates within 10 % of the best held-out reduction,
+        // the one with the fewest parameters (then the larger reduction) wins.
+        let top = scores.iter().filter(|s| s.significant()).map(|s| s.delta).fold(0.0, f64::max);
         let best = scores
             .iter()
             .enumerate()
-            .filter(|(_, s)| s.significant())
-            .max_by(|a, b| a.1.delta.total_cmp(&b.1.delta))
+            .filter(|(_, s)| s.significant() && s.delta >= 0.9 * top)
+            .min_by(|a, b| {
+                cands[a.0].extra.len().cmp(&cands[b.0].extra.len()).then(b.1.delta.total_cmp(&a.1.delta))
+            })
             .map(|(i, s)| (i, *s));
         let Some((bi, score)) = best else {
             rounds.push(round);

@@ -70,20 +70,42 @@ impl TifMap {
         self.rate_nm_per_s.iter().cloned().fold(0.0, f64::max)
     }
 
-    /// Bilinear value at an offset (mm) from the tool centre; 0 outside the map.
+    /// Value at an offset (mm) from the tool centre by Catmull-Rom bicubic interpolation (exact
+    /// at the nodes; O(h^4) error, so a widened spot is not blurred by interpolation); the rate is
+    /// 0 outside the map.
     pub fn value_at_mm(&self, x_mm: f64, y_mm: f64) -> f64 {
         let (r, c) = self.rate_nm_per_s.dim();
         let fi = y_mm / self.dy_mm + (r / 2) as f64;
         let fj = x_mm / self.dx_mm + (c / 2) as f64;
-        if fi < 0.0 || fj < 0.0 || fi > (r - 1) as f64 || fj > (c - 1) as f64 {
+        if fi <= -1.0 || fj <= -1.0 || fi >= r as f64 || fj >= c as f64 {
             return 0.0;
         }
-        let (i0, j0) = (fi.floor() as usize, fj.floor() as usize);
-        let (i1, j1) = ((i0 + 1).min(r - 1), (j0 + 1).min(c - 1));
-        let (a, b) = (fi - i0 as f64, fj - j0 as f64);
-        let t = &self.rate_nm_per_s;
-        (1.0 - a) * ((1.0 - b) * t[(i0, j0)] + b * t[(i0, j1)])
-            + a * ((1.0 - b) * t[(i1, j0)] + b * t[(i1, j1)])
+        let (i0, j0) = (fi.floor() as isize, fj.floor() as isize);
+        let (ti, tj) = (fi - i0 as f64, fj - j0 as f64);
+        let w = |t: f64| {
+            [
+                0.5 * (-t * t * t + 2.0 * t * t - t),
+                0.5 * (3.0 * t * t * t - 5.0 * t * t + 2.0),
+                0.5 * (-3.0 * t * t * t + 4.0 * t * t + t),
+                0.5 * (t * t * t - t * t),
+            ]
+        };
+        let (wi, wj) = (w(ti), w(tj));
+        let mut s = 0.0;
+        for (a, wa) in wi.iter().enumerate() {
+            let ii = i0 - 1 + a as isize;
+            if ii < 0 || ii >= r as isize {
+                continue;
+            }
+            for (b, wb) in wj.iter().enumerate() {
+                let jj = j0 - 1 + b as isize;
+                if jj < 0 || jj >= c as isize {
+                    continue;
+                }
+                s += wa * wb * self.rate_nm_per_s[(ii as usize, jj as usize)];
+            }
+        }
+        s
     }
 
     /// Support radius (mm): the largest distance from the centre of a pixel whose rate exceeds

@@ -20,6 +20,7 @@ pub mod deposit;
 pub mod raster;
 pub mod surface_fn;
 pub mod true_tif;
+pub mod write;
 
 use bonnetlab_surface::rng::Rng;
 use bonnetlab_surface::Surface;
