@@ -78,7 +78,7 @@ pub fn model_toml(fit: &BonnetFit) -> Result<String, SpotsError> {
         "# Bonnet TIF model fitted by `bonnetlab spots` to {n} spot(s) of bonnet \"{bonnet}\".\n\
          # Paste the [tif] table into a run recipe (spec/interfaces.md). The peak rate is the fitted\n\
          # model's prediction at these settings (inner pressure {pin} MPa); at other settings use\n\
-         # the physical parameters in [spots_fit] (rate = k p |v|, see bonnetlab_spots::model).\n\
+         # the physical parameters in the spots_fit table (rate = k p |v|, bonnetlab_spots::model).\n\
          [tif]\n\
          model = {{ kind = \"bonnet\", radius_mm = {r}, offset_mm = {h}, precession_deg = {t}, \
          spindle_rpm = {n_rpm}, pressure = \"{pr}\", peak_rate_nm_per_s = {peak} }}\n\
