@@ -199,13 +199,20 @@ pub fn parse(bytes: &[u8]) -> Result<Surface, ParseError> {
     let phase = bytes
         .get(start..)
         .ok_or_else(|| ParseError::invalid("phase block missing"))?;
-    let mut heights = Vec::with_capacity(rows * cols);
-    let mut valid = Vec::with_capacity(rows * cols);
-    for c in phase.chunks_exact(4) {
+    // Zeroed buffers filled in place: one pass, no capacity checks (this loop is the read time
+    // of a 4096 x 4096 map).
+    let mut heights = vec![0.0f64; rows * cols];
+    let mut valid = vec![false; rows * cols];
+    for ((c, h), v) in phase
+        .chunks_exact(4)
+        .zip(heights.iter_mut())
+        .zip(valid.iter_mut())
+    {
         let raw = i32::from_be_bytes([c[0], c[1], c[2], c[3]]);
-        let ok = raw < NO_DATA_MIN;
-        valid.push(ok);
-        heights.push(if ok { f64::from(raw) * scale } else { 0.0 });
+        if raw < NO_DATA_MIN {
+            *v = true;
+            *h = f64::from(raw) * scale;
+        }
     }
     build_surface(
         heights,
