@@ -1,10 +1,602 @@
-//! `bonnetlab psd` (contract: shared/spec/interfaces.md).
+//! `bonnetlab psd FILE [--axis x|y|both] [--window ...] [--pitch-mm P] [--remove TERMS] [--json]
+//! [--csv OUT] [--plot OUT.png|OUT.svg]` (contract: shared/spec/interfaces.md).
+//!
+//! Reads one map, removes the form terms jointly (default piston, tilt), and prints the
+//! ONE-SIDED 1-D PSDs along X (rows) and Y (columns) in nm^2 mm with their band RMS values;
+//! with `--pitch-mm`, the ripple check at f0 = 1/pitch in the Y PSD. Every printed number
+//! carries its band, window and removed terms. `--json` prints one JSON object (stable field
+//! order, no time stamps); `--csv` writes the spectra in long form; `--plot` draws both PSDs
+//! log-log with the grating frequency and its harmonics marked.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use bonnetlab_spectrum::{
+    band, check_limit, psd_x, psd_xy, psd_y, ripple_from_psds, to_gwyddion_w1,
+    to_surfacetopography_c1d, BandRms, ConvertedPsd, Detrend, LimitCheck, LimitLine, Psd1d,
+    PsdOptions, Ripple, RippleOptions, SpectrumError, Window, MSF_DEFAULT_PER_MM,
+};
+use bonnetlab_surface::{Surface, SurfaceError, Term};
+use serde::Serialize;
 
 use super::CliError;
+use crate::report::plot::{LinePlot, Series};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum AxisArg {
+    X,
+    Y,
+    Both,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum DetrendArg {
+    Mean,
+    Linear,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Convention {
+    /// Gwyddion: W1(K), K = 2 pi f rad/mm, W1 = P1 / (4 pi).
+    Gwyddion,
+    /// SurfaceTopography: C1D(q), q = 2 pi f rad/mm, C1D = P1 / 2.
+    Surfacetopography,
+}
 
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Map file; the format is detected from the content.
+    pub file: PathBuf,
+    /// Which 1-D PSDs to report: along X (rows), along Y (columns, the raster feed), or both.
+    #[arg(long, value_enum, default_value = "both")]
+    pub axis: AxisArg,
+    /// Data window: hann (periodic, default), none, tukey, blackman, welch.
+    #[arg(long, default_value = "hann")]
+    pub window: String,
+    /// Taper fraction of the Tukey window (0 = none, 1 = Hann).
+    #[arg(long, default_value_t = 0.5)]
+    pub tukey_alpha: f64,
+    /// Raster pitch (grating spacing) in mm: adds the ripple check at f0 = 1/pitch along Y.
+    #[arg(long)]
+    pub pitch_mm: Option<f64>,
+    /// Comma list of form terms removed jointly from the whole map before the PSDs.
+    #[arg(long, default_value = "piston,tilt")]
+    pub remove: String,
+    /// Per-segment detrend after the global form removal.
+    #[arg(long, value_enum, default_value = "mean")]
+    pub detrend: DetrendArg,
+    /// Longest dropout (pixels) inside a line that is filled by linear interpolation.
+    #[arg(long, default_value_t = 5)]
+    pub max_gap_px: usize,
+    /// Highest ripple harmonic considered.
+    #[arg(long, default_value_t = 5)]
+    pub harmonics: usize,
+    /// Prominence (dB over the flanking median) at which the ripple counts as detected.
+    #[arg(long, default_value_t = bonnetlab_spectrum::PROMINENCE_THRESHOLD_DB)]
+    pub prominence_threshold_db: f64,
+    /// MSF band edges F1,F2 in mm^-1 (default 1/33,1/0.12 i.e. periods 33 mm to 0.12 mm).
+    #[arg(long, value_name = "F1,F2")]
+    pub msf_band: Option<String>,
+    /// ISO 10110-8 style limit line A,B[,F1,F2]: PSD(f) <= A f^-B (f in mm^-1) over [F1, F2].
+    #[arg(long, value_name = "A,B[,F1,F2]")]
+    pub limit: Option<String>,
+    /// The limit line's A refers to a two-sided PSD (default: one-sided, like our PSD).
+    #[arg(long)]
+    pub limit_two_sided: bool,
+    /// Also give the PSDs in a peer tool's convention (JSON `converted`, extra CSV columns).
+    #[arg(long, value_enum)]
+    pub convention: Option<Convention>,
+    /// Pixel size in mm for a map whose file says it is unknown (square pixels).
+    #[arg(long)]
+    pub pixel_mm: Option<f64>,
+    /// Print one JSON object instead of a summary.
+    #[arg(long)]
+    pub json: bool,
+    /// Write the spectra as CSV (axis,freq_per_mm,psd_nm2_mm[,q_rad_per_mm,converted_nm2_mm]).
+    #[arg(long, value_name = "OUT")]
+    pub csv: Option<PathBuf>,
+    /// Draw the PSDs log-log (X and Y, grating frequency and harmonics marked): .png or .svg.
+    #[arg(long, value_name = "OUT")]
+    pub plot: Option<PathBuf>,
+}
 
-pub fn run(_args: &Args) -> Result<(), CliError> {
-    Err(CliError::usage("'psd' is not available in this build yet"))
+/// One axis in the JSON output (`freq_per_mm`, `psd_nm2_mm` are the contract).
+#[derive(Debug, Clone, Serialize)]
+pub struct AxisReport {
+    pub freq_per_mm: Vec<f64>,
+    /// ONE-SIDED, nm^2 mm.
+    pub psd_nm2_mm: Vec<f64>,
+    pub df_per_mm: f64,
+    pub sidedness: &'static str,
+    pub window: Window,
+    pub enbw_bins: f64,
+    pub removed: Vec<Term>,
+    pub n_lines: usize,
+    pub n_segments: usize,
+    /// Bins below this index are biased by detrending.
+    pub biased_bins: usize,
+    /// RMS over all unbiased bins up to Nyquist, nm.
+    pub rms_unbiased_nm: f64,
+    pub msf: BandRms,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub limit: Option<LimitCheck>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub converted: Option<ConvertedPsd>,
+}
+
+/// The JSON object printed by `psd --json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct PsdReport {
+    pub file: String,
+    pub format: String,
+    pub rows: usize,
+    pub cols: usize,
+    pub dx_mm: f64,
+    pub dy_mm: f64,
+    pub window: Window,
+    pub enbw_bins: f64,
+    pub removed: Vec<Term>,
+    pub detrend: Detrend,
+    pub max_gap_px: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub x: Option<AxisReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub y: Option<AxisReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ripple: Option<Ripple>,
+}
+
+pub fn run(args: &Args) -> Result<(), CliError> {
+    let file = args.file.as_path();
+    let opts = options(args)?;
+    let msf = parse_pair(args.msf_band.as_deref(), "--msf-band")?.unwrap_or(MSF_DEFAULT_PER_MM);
+    let limit = parse_limit(args)?;
+    if let Some(p) = &args.plot {
+        plot_kind(p)?;
+    }
+    let mut surface = read_map(file)?;
+    if let Some(px) = args.pixel_mm {
+        if !(px.is_finite() && px > 0.0) {
+            return Err(CliError::usage(format!(
+                "--pixel-mm must be positive, got {px}"
+            )));
+        }
+        surface.dx_mm = Some(surface.dx_mm.unwrap_or(px));
+        surface.dy_mm = Some(surface.dy_mm.unwrap_or(px));
+    }
+    let report = analyse(&surface, file, args, &opts, msf, limit.as_ref())?;
+    if let Some(out) = &args.csv {
+        write_csv(out, &report)?;
+    }
+    if let Some(out) = &args.plot {
+        write_plot(out, &report, args.pitch_mm, args.harmonics)?;
+    }
+    let text = if args.json {
+        serde_json::to_string(&report)
+            .map_err(|e| CliError::processing(file, format!("JSON: {e}")))?
+    } else {
+        summary(&report)
+    };
+    let mut out = std::io::stdout().lock();
+    // A closed pipe is not an error worth reporting.
+    let _ = writeln!(out, "{text}");
+    Ok(())
+}
+
+fn options(args: &Args) -> Result<PsdOptions, CliError> {
+    let window = Window::parse(&args.window, args.tukey_alpha)
+        .map_err(|e| CliError::usage(format!("--window: {e}")))?;
+    let remove =
+        Term::parse_list(&args.remove).map_err(|e| CliError::usage(format!("--remove: {e}")))?;
+    Ok(PsdOptions {
+        window,
+        remove,
+        detrend: match args.detrend {
+            DetrendArg::Mean => Detrend::Mean,
+            DetrendArg::Linear => Detrend::Linear,
+        },
+        max_gap_px: args.max_gap_px,
+        ..PsdOptions::default()
+    })
+}
+
+fn parse_numbers(s: &str, flag: &str) -> Result<Vec<f64>, CliError> {
+    s.split(',')
+        .map(|t| {
+            let t = t.trim();
+            let v = if let Some(d) = t.strip_prefix("1/") {
+                d.parse::<f64>().map(|d| 1.0 / d)
+            } else {
+                t.parse::<f64>()
+            };
+            v.ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| CliError::usage(format!("{flag}: '{t}' is not a number")))
+        })
+        .collect()
+}
+
+fn parse_pair(s: Option<&str>, flag: &str) -> Result<Option<(f64, f64)>, CliError> {
+    let Some(s) = s else { return Ok(None) };
+    let v = parse_numbers(s, flag)?;
+    match v.as_slice() {
+        [a, b] if *a >= 0.0 && b >= a => Ok(Some((*a, *b))),
+        _ => Err(CliError::usage(format!(
+            "{flag}: expected F1,F2 with 0 <= F1 <= F2, got '{s}'"
+        ))),
+    }
+}
+
+fn parse_limit(args: &Args) -> Result<Option<LimitLine>, CliError> {
+    let Some(s) = args.limit.as_deref() else {
+        return Ok(None);
+    };
+    let v = parse_numbers(s, "--limit")?;
+    let (a, b, f1, f2) = match v.as_slice() {
+        [a, b] => (*a, *b, 0.0, f64::INFINITY),
+        [a, b, f1, f2] => (*a, *b, *f1, *f2),
+        _ => {
+            return Err(CliError::usage(format!(
+                "--limit: expected A,B or A,B,F1,F2, got '{s}'"
+            )))
+        }
+    };
+    if !(a > 0.0) || f1 < 0.0 || f2 < f1 {
+        return Err(CliError::usage(format!(
+            "--limit: need A > 0 and 0 <= F1 <= F2, got '{s}'"
+        )));
+    }
+    Ok(Some(LimitLine {
+        a,
+        b,
+        f1_per_mm: f1,
+        f2_per_mm: f2,
+        two_sided: args.limit_two_sided,
+    }))
+}
+
+fn plot_kind(p: &Path) -> Result<&'static str, CliError> {
+    match p
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        Some("png") => Ok("png"),
+        Some("svg") => Ok("svg"),
+        _ => Err(CliError::usage(format!(
+            "--plot {}: the name must end in .png or .svg",
+            p.display()
+        ))),
+    }
+}
+
+/// Reads a map through `bonnetlab_io`, keeping the reader's exit code and one-line message.
+fn read_map(file: &Path) -> Result<Surface, CliError> {
+    bonnetlab_io::read_surface(file).map_err(|e| {
+        let msg = e.to_string();
+        let shown = file.display().to_string();
+        let message = if msg.contains(&shown) {
+            msg
+        } else {
+            format!("{shown}: {msg}")
+        };
+        CliError {
+            code: e.exit_code(),
+            message: message.replace(['\n', '\r'], " "),
+        }
+    })
+}
+
+fn spectrum_error(file: &Path, e: SpectrumError) -> CliError {
+    match e {
+        SpectrumError::Surface(SurfaceError::NoValidPixel)
+        | SpectrumError::Surface(SurfaceError::TooFewPixels { .. })
+        | SpectrumError::Surface(SurfaceError::Singular(_))
+        | SpectrumError::NoUsableLine { .. }
+        | SpectrumError::TooSmall(_) => CliError::processing(file, e),
+        _ => CliError::input(file, e),
+    }
+}
+
+fn analyse(
+    s: &Surface,
+    file: &Path,
+    args: &Args,
+    opts: &PsdOptions,
+    msf: (f64, f64),
+    limit: Option<&LimitLine>,
+) -> Result<PsdReport, CliError> {
+    let (dx, dy) = s
+        .pixel_mm("the PSD")
+        .map_err(|e| CliError::input(file, format!("{e} (use --pixel-mm)")))?;
+    let err = |e| spectrum_error(file, e);
+    let need_x = args.axis != AxisArg::Y || args.pitch_mm.is_some();
+    let need_y = args.axis != AxisArg::X || args.pitch_mm.is_some();
+    // One form fit for both axes.
+    let (x, y) = match (need_x, need_y) {
+        (true, true) => {
+            let (x, y) = psd_xy(s, opts).map_err(err)?;
+            (Some(x), Some(y))
+        }
+        (true, false) => (Some(psd_x(s, opts).map_err(err)?), None),
+        _ => (None, Some(psd_y(s, opts).map_err(err)?)),
+    };
+    let removed = x
+        .as_ref()
+        .or(y.as_ref())
+        .map(|p| p.removed.clone())
+        .unwrap_or_default();
+    let ripple = match (args.pitch_mm, &x, &y) {
+        (Some(p), Some(px), Some(py)) => {
+            let ropts = RippleOptions {
+                harmonics: args.harmonics,
+                prominence_threshold_db: args.prominence_threshold_db,
+            };
+            Some(ripple_from_psds(px, py, p, &ropts).map_err(err)?)
+        }
+        _ => None,
+    };
+    let axis_report = |p: &Psd1d| -> Result<AxisReport, CliError> {
+        let nyq = p.freq_per_mm.last().copied().unwrap_or(0.0);
+        let all = band(p, 0.0, nyq).map_err(err)?;
+        Ok(AxisReport {
+            freq_per_mm: p.freq_per_mm.clone(),
+            psd_nm2_mm: p.psd_nm2_mm.clone(),
+            df_per_mm: p.df_per_mm,
+            sidedness: "one-sided",
+            window: p.window,
+            enbw_bins: p.enbw_bins,
+            removed: p.removed.clone(),
+            n_lines: p.n_lines,
+            n_segments: p.n_segments,
+            biased_bins: p.biased_bins,
+            rms_unbiased_nm: all.rms_nm,
+            msf: band(p, msf.0, msf.1).map_err(err)?,
+            // An open upper edge means "up to Nyquist".
+            limit: limit
+                .map(|l| {
+                    check_limit(
+                        p,
+                        &LimitLine {
+                            f2_per_mm: l.f2_per_mm.min(nyq),
+                            ..*l
+                        },
+                    )
+                })
+                .transpose()
+                .map_err(err)?,
+            converted: args.convention.map(|c| match c {
+                Convention::Gwyddion => to_gwyddion_w1(p),
+                Convention::Surfacetopography => to_surfacetopography_c1d(p),
+            }),
+        })
+    };
+    let show_x = args.axis != AxisArg::Y;
+    let show_y = args.axis != AxisArg::X;
+    let xr = match (&x, show_x) {
+        (Some(p), true) => Some(axis_report(p)?),
+        _ => None,
+    };
+    let yr = match (&y, show_y) {
+        (Some(p), true) => Some(axis_report(p)?),
+        _ => None,
+    };
+    let enbw = xr
+        .as_ref()
+        .or(yr.as_ref())
+        .map(|a| a.enbw_bins)
+        .unwrap_or(f64::NAN);
+    Ok(PsdReport {
+        file: file.display().to_string(),
+        format: s.provenance.format.clone(),
+        rows: s.rows(),
+        cols: s.cols(),
+        dx_mm: dx,
+        dy_mm: dy,
+        window: opts.window,
+        enbw_bins: enbw,
+        removed,
+        detrend: opts.detrend,
+        max_gap_px: opts.max_gap_px,
+        x: xr,
+        y: yr,
+        ripple,
+    })
+}
+
+fn names(terms: &[Term]) -> String {
+    if terms.is_empty() {
+        return "none".into();
+    }
+    serde_json::to_value(terms)
+        .ok()
+        .and_then(|v| v.as_array().cloned())
+        .map(|a| {
+            a.iter()
+                .filter_map(|t| t.as_str().map(String::from))
+                .collect::<Vec<_>>()
+                .join(", ")
+        })
+        .unwrap_or_default()
+}
+
+fn summary(r: &PsdReport) -> String {
+    let mut o = String::new();
+    let mut line = |s: String| {
+        o.push_str(&s);
+        o.push('\n');
+    };
+    line(format!(
+        "{} ({}): {} x {} pixels, dx {} mm, dy {} mm",
+        r.file, r.format, r.rows, r.cols, r.dx_mm, r.dy_mm
+    ));
+    line(format!(
+        "removed: {}; per-segment detrend: {:?}; window: {} (ENBW {:.3} bins); gaps <= {} px interpolated",
+        names(&r.removed),
+        r.detrend,
+        r.window,
+        r.enbw_bins,
+        r.max_gap_px
+    ));
+    line("PSDs are one-sided, nm^2 mm; band RMS by bin sums".into());
+    for (name, a) in [("X (rows)", &r.x), ("Y (columns)", &r.y)] {
+        let Some(a) = a else { continue };
+        line(format!(
+            "{name}: {} lines, {} segments, df {:.6} mm^-1, RMS above bin {} (unbiased) {:.4} nm",
+            a.n_lines, a.n_segments, a.df_per_mm, a.biased_bins, a.rms_unbiased_nm
+        ));
+        line(format!(
+            "  MSF band [{:.6}, {:.6}] mm^-1 (used [{:.6}, {:.6}]): {:.4} nm",
+            a.msf.f1_per_mm,
+            a.msf.f2_per_mm,
+            a.msf.f1_used_per_mm,
+            a.msf.f2_used_per_mm,
+            a.msf.rms_nm
+        ));
+        if let Some(l) = &a.limit {
+            line(format!(
+                "  limit {} f^-{} ({}) over [{}, {}] mm^-1: worst ratio {:.3} at {:.4} mm^-1: {}",
+                l.line.a,
+                l.line.b,
+                l.sidedness,
+                l.line.f1_per_mm,
+                l.line.f2_per_mm,
+                l.worst_ratio,
+                l.worst_freq_per_mm,
+                if l.pass { "PASS" } else { "FAIL" }
+            ));
+        }
+    }
+    if let Some(rp) = &r.ripple {
+        line(format!(
+            "ripple along Y at pitch {} mm (f0 {:.6} mm^-1, bands |f - k f0| <= {:.6} mm^-1):",
+            rp.pitch_mm, rp.f0_per_mm, rp.band_halfwidth_per_mm
+        ));
+        line(format!(
+            "  sigma_1 {:.4} nm, sigma_total {:.4} nm, A_eq {:.4} nm, PV_eq {:.4} nm",
+            rp.sigma1_nm, rp.sigma_total_nm, rp.a_eq_nm, rp.pv_eq_nm
+        ));
+        line(format!(
+            "  prominence {:.2} dB over the flanking median (threshold {} dB): {}{}",
+            rp.prominence_db,
+            rp.prominence_threshold_db,
+            if rp.detected {
+                "DETECTED"
+            } else {
+                "not detected"
+            },
+            if rp.biased {
+                " (band reaches the biased lowest bins)"
+            } else {
+                ""
+            }
+        ));
+        line(format!(
+            "  Y/X at f0: {}",
+            rp.y_over_x
+                .map_or("n/a (no X power in the band)".into(), |v| format!("{v:.3}"))
+        ));
+        let h: Vec<String> = rp
+            .harmonics
+            .iter()
+            .map(|h| format!("{}f0 {:.4} nm", h.k, h.sigma_nm))
+            .collect();
+        line(format!("  harmonics: {}", h.join(", ")));
+    }
+    o.trim_end().to_string()
+}
+
+fn axis_rows<'a>(r: &'a PsdReport) -> impl Iterator<Item = (&'static str, &'a AxisReport)> {
+    [("x", r.x.as_ref()), ("y", r.y.as_ref())]
+        .into_iter()
+        .filter_map(|(n, a)| a.map(|a| (n, a)))
+}
+
+fn write_csv(out: &Path, r: &PsdReport) -> Result<(), CliError> {
+    let mut text = String::new();
+    let conv = axis_rows(r)
+        .next()
+        .and_then(|(_, a)| a.converted.as_ref())
+        .map(|c| c.convention);
+    match conv {
+        Some(c) => text.push_str(&format!(
+            "axis,freq_per_mm,psd_nm2_mm,q_rad_per_mm,{}_nm2_mm\n",
+            c.replace('-', "_")
+        )),
+        None => text.push_str("axis,freq_per_mm,psd_nm2_mm\n"),
+    }
+    for (name, a) in axis_rows(r) {
+        for (k, (f, p)) in a.freq_per_mm.iter().zip(&a.psd_nm2_mm).enumerate() {
+            match &a.converted {
+                Some(c) => text.push_str(&format!(
+                    "{name},{f:e},{p:e},{:e},{:e}\n",
+                    c.q_rad_per_mm[k], c.values_nm2_mm[k]
+                )),
+                None => text.push_str(&format!("{name},{f:e},{p:e}\n")),
+            }
+        }
+    }
+    write_atomic(out, text.as_bytes())
+        .map_err(|e| CliError::processing(out, format!("cannot write: {e}")))
+}
+
+fn write_plot(
+    out: &Path,
+    r: &PsdReport,
+    pitch: Option<f64>,
+    harmonics: usize,
+) -> Result<(), CliError> {
+    let mut plot = LinePlot::new(
+        format!("1-D PSD ({}, window {})", r.file, r.window),
+        "spatial frequency f (mm^-1)",
+        "one-sided PSD (nm^2 mm)",
+    )
+    .log_log();
+    for (name, a) in axis_rows(r) {
+        // Biased lowest bins are left out of the plot.
+        let skip = a.biased_bins;
+        plot = plot.series(Series::new(
+            if name == "x" {
+                "X (along rows)"
+            } else {
+                "Y (along columns, feed)"
+            },
+            a.freq_per_mm[skip.min(a.freq_per_mm.len())..].to_vec(),
+            a.psd_nm2_mm[skip.min(a.psd_nm2_mm.len())..].to_vec(),
+        ));
+    }
+    if let Some(p) = pitch {
+        plot = plot.grating_markers(p, harmonics);
+    }
+    let bytes = match plot_kind(out)? {
+        "svg" => plot.to_svg().map(String::into_bytes),
+        _ => plot.to_png(),
+    }
+    .map_err(|e| CliError::processing(out, e))?;
+    write_atomic(out, &bytes).map_err(|e| CliError::processing(out, format!("cannot write: {e}")))
+}
+
+/// Whole-or-nothing output: a temporary file in the same directory, then a rename. (A small
+/// private version until bonnetlab_io's atomic writer is available.)
+fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let res = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if res.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    res
 }

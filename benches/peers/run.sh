@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# Side-by-side timing of the spectral workloads: criterion (benches/spectrum.rs, release) and
+# the NumPy / SciPy peer (psd_numpy.py) on the same machine, then a Markdown table of medians
+# and ratios. Creates its own virtual environment (benches/peers/.venv) on first use.
+# Usage: benches/peers/run.sh [SIZES]   (SIZES default 512,1024,2048,4096)
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+root="$(cd "$here/../.." && pwd)"
+sizes="${1:-512,1024,2048,4096}"
+venv="$here/.venv"
+if [ ! -x "$venv/bin/python" ]; then
+    python3 -m venv "$venv"
+    "$venv/bin/pip" install --quiet --upgrade pip
+    "$venv/bin/pip" install --quiet numpy scipy
+fi
+out="$root/target/peers"
+mkdir -p "$out"
+echo "== machine: $(nproc) cores, $(date -u +%Y-%m-%dT%H:%MZ)"
+echo "== criterion (release): cargo bench --bench spectrum"
+filter="spectrum/(psd_xy_ripple|psd_2d_radial)/($(echo "$sizes" | tr ',' '|'))$"
+(cd "$root" && cargo bench --bench spectrum -- "$filter")
+echo "== peer: NumPy / SciPy"
+"$venv/bin/python" "$here/psd_numpy.py" --sizes "$sizes" --out "$out/psd_numpy.jsonl"
+echo "== medians side by side"
+"$venv/bin/python" "$here/compare.py" "$root/target/criterion" "$out/psd_numpy.jsonl"
