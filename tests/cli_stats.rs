@@ -32,8 +32,21 @@ fn json(file: &Path, remove: &str) -> serde_json::Value {
 
 /// (file, format, rows, cols, dx [m] or 0 for unknown, valid, PV piston, RMS piston,
 /// PV plane, RMS plane): spec/zygo-formats.md section 7.
+type Golden = (
+    &'static str,
+    &'static str,
+    usize,
+    usize,
+    f64,
+    usize,
+    f64,
+    f64,
+    f64,
+    f64,
+);
+
 #[rustfmt::skip]
-const GOLDEN: [(&str, &str, usize, usize, f64, usize, f64, f64, f64, f64); 12] = [
+const GOLDEN: [Golden; 12] = [
     ("surfalize_test_1.dat", "metropro-dat", 480, 640, 1.09825e-06, 307200, 1363.056, 75.2882, 1363.405, 13.3350),
     ("pyxsurf_05_C1S01.dat", "metropro-dat", 480, 640, 1.0963e-07, 307200, 347.231, 86.4682, 289.487, 81.1547),
     ("pyxsurf_05_C1S01.asc", "metropro-asc", 480, 640, 1.0963e-06, 307200, 347.231, 86.4682, 289.487, 81.1547),
