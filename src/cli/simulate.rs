@@ -1,10 +1,320 @@
-//! `bonnetlab simulate` (contract: shared/spec/interfaces.md).
+//! `bonnetlab simulate RECIPE.toml [--bonnet original|suppression] [--exact] --out DIR`
+//! (contract: shared/spec/interfaces.md).
+//!
+//! Predicts the after map of a run from its recipe: the before map, the TIF (measured spot or
+//! model), the path log. Writes `DIR/predicted_after.dat`, `DIR/predicted_removal.dat`,
+//! `DIR/simulation.json` and plots (`predicted_removal.png`, `predicted_after.png`,
+//! `predicted_psd_y.png`).
+//!
+//! Figures: RMS / PV of the before and predicted after maps with piston and tilt removed
+//! (jointly, over the before map's valid pixels); CR = (before - after) / before; the Y-direction
+//! `ripple` object of the predicted after map at the recipe's pitch (as `psd` prints it); and a
+//! `mechanisms` array, each entry the MSF-band RMS (Y PSD, band `msf_band_per_mm`) a coupling
+//! mechanism imprints and its share of the summed band power. Without vibration coupling the only
+//! mechanism is `nominal_raster`: the MSF content of the predicted removal itself (the raster
+//! imprint of the TIF at the pitch). Vibration mechanisms are appended to the same array.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+
+use bonnetlab_io::MapFormat;
+use bonnetlab_process::recipe::{Recipe, TifSource};
+use bonnetlab_process::simulate::{predict, Mode, Prediction, ToolModel};
+use bonnetlab_process::{read_path_csv, Grid, ProcessError};
+use bonnetlab_spectrum::{
+    band_rms, psd_xy, ripple_from_psds, Psd1d, PsdOptions, Ripple, RippleOptions,
+    MSF_DEFAULT_PER_MM,
+};
+use bonnetlab_surface::{height_stats, remove_terms, Surface, Term};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Serialize;
 
 use super::CliError;
+use crate::report;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BonnetArg {
+    Original,
+    Suppression,
+}
 
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Run recipe (TOML: [measurement], [tif], [path], [process], [vibration]).
+    pub recipe: PathBuf,
+    /// Bonnet type (overrides the recipe's [process] bonnet).
+    #[arg(long, value_enum)]
+    pub bonnet: Option<BonnetArg>,
+    /// Exact time-domain deposition instead of the fast FFT method (the reference; slower).
+    #[arg(long)]
+    pub exact: bool,
+    /// Output directory.
+    #[arg(long)]
+    pub out: PathBuf,
+}
 
-pub fn run(_args: &Args) -> Result<(), CliError> {
-    Err(CliError::usage("'simulate' is not available in this build yet"))
+/// One coupling mechanism's contribution to the predicted MSF band.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Mechanism {
+    pub name: String,
+    pub msf_band_rms_nm: f64,
+    /// Fraction of the summed MSF band power (shares add up to 1).
+    pub share: f64,
+}
+
+/// Builds the mechanisms array from (name, band RMS) pairs: shares are power fractions.
+pub fn mechanisms(parts: &[(&str, f64)]) -> Vec<Mechanism> {
+    let total: f64 = parts.iter().map(|(_, r)| r * r).sum();
+    parts
+        .iter()
+        .map(|&(name, r)| Mechanism {
+            name: name.to_string(),
+            msf_band_rms_nm: r,
+            share: if total > 0.0 { r * r / total } else { 0.0 },
+        })
+        .collect()
+}
+
+/// The JSON written to `simulation.json` (contract fields: `rms_after_nm`, `pv_after_nm`,
+/// `cr_rms`, `ripple`, `mechanisms`).
+#[derive(Debug, Clone, Serialize)]
+pub struct SimulationReport {
+    pub recipe: String,
+    pub mode: String,
+    pub bonnet: String,
+    pub removed: Vec<Term>,
+    pub rms_before_nm: f64,
+    pub pv_before_nm: f64,
+    pub rms_after_nm: f64,
+    pub pv_after_nm: f64,
+    pub cr_rms: f64,
+    pub cr_pv: f64,
+    pub removal_mean_nm: f64,
+    pub removal_rms_nm: f64,
+    pub path_duration_s: f64,
+    pub path_length_mm: f64,
+    pub tif_peak_rate_nm_per_s: f64,
+    pub tif_volume_rate_nm_mm2_per_s: f64,
+    pub pitch_mm: Option<f64>,
+    /// Ripple of the predicted after map along Y at the pitch (null without a pitch).
+    pub ripple: Option<Ripple>,
+    pub msf_band_per_mm: (f64, f64),
+    pub mechanisms: Vec<Mechanism>,
+    pub notes: Vec<String>,
+}
+
+/// Everything `simulate` computes, before writing.
+pub struct Simulation {
+    pub report: SimulationReport,
+    pub prediction: Prediction,
+    pub before: Surface,
+    pub psd_y_after: Psd1d,
+    pub psd_y_before: Psd1d,
+}
+
+fn perr(file: &Path, e: ProcessError) -> CliError {
+    let msg = e.to_string();
+    // Recipe and path-log errors already name their file.
+    let named = matches!(
+        e,
+        ProcessError::Recipe { .. } | ProcessError::PathLog { .. } | ProcessError::Io { .. }
+    );
+    let code = if e.is_bad_input() { 2 } else { 1 };
+    if named {
+        CliError { code, message: msg }
+    } else if code == 2 {
+        CliError::input(file, msg)
+    } else {
+        CliError::processing(file, msg)
+    }
+}
+
+fn progress(n: u64) -> ProgressBar {
+    let target = if std::io::stderr().is_terminal() {
+        ProgressDrawTarget::stderr()
+    } else {
+        ProgressDrawTarget::hidden()
+    };
+    let bar = ProgressBar::with_draw_target(Some(n), target);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} simulate [{bar:30}] {pos}/{len} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar
+}
+
+/// Runs the simulation of a recipe (no files written).
+pub fn simulate_recipe(
+    recipe_file: &Path,
+    bonnet: Option<BonnetArg>,
+    exact: bool,
+) -> Result<Simulation, CliError> {
+    let bar = progress(6);
+    let step = |msg: &str| {
+        bar.set_message(msg.to_string());
+        bar.inc(1);
+    };
+    step("recipe");
+    let recipe = Recipe::load(recipe_file).map_err(|e| perr(recipe_file, e))?;
+    let before = super::stats::read_map(&recipe.before)?;
+    let grid = Grid::of(&before).map_err(|e| perr(&recipe.before, e))?;
+    step("tif");
+    let spot = match &recipe.tif {
+        TifSource::Spot { path, .. } => Some(super::stats::read_map(path)?),
+        _ => None,
+    };
+    let spot_file = match &recipe.tif {
+        TifSource::Spot { path, .. } => path.clone(),
+        _ => recipe_file.to_path_buf(),
+    };
+    let tool = ToolModel::from_source(&recipe.tif, spot.as_ref(), grid.dx_mm, grid.dy_mm)
+        .map_err(|e| perr(&spot_file, e))?;
+    step("path");
+    let path = read_path_csv(&recipe.path_log).map_err(|e| perr(&recipe.path_log, e))?;
+    step("removal");
+    let mode = if exact { Mode::Exact } else { Mode::Fast };
+    let prediction =
+        predict(&before, &tool, &path, None, mode).map_err(|e| perr(&recipe.before, e))?;
+    step("metrics");
+    let terms = [Term::Piston, Term::Tilt];
+    let figures = |s: &Surface| -> Result<(f64, f64), CliError> {
+        let (r, _) =
+            remove_terms(s, &terms).map_err(|e| CliError::processing(&recipe.before, e))?;
+        let h = height_stats(&r).map_err(|e| CliError::processing(&recipe.before, e))?;
+        Ok((h.rms_nm, h.pv_nm))
+    };
+    let (rms_b, pv_b) = figures(&before)?;
+    let (rms_a, pv_a) = figures(&prediction.after)?;
+    let removal_stats =
+        height_stats(&prediction.removal).map_err(|e| CliError::processing(&recipe.before, e))?;
+    let opts = PsdOptions::default();
+    let serr = |e: bonnetlab_spectrum::SpectrumError| CliError::processing(&recipe.before, e);
+    let (px_a, py_a) = psd_xy(&prediction.after, &opts).map_err(serr)?;
+    let (_, py_b) = psd_xy(&before, &opts).map_err(serr)?;
+    let (_, py_r) = psd_xy(&prediction.removal, &opts).map_err(serr)?;
+    let ripple = match recipe.pitch_mm {
+        Some(p) => {
+            Some(ripple_from_psds(&px_a, &py_a, p, &RippleOptions::default()).map_err(serr)?)
+        }
+        None => None,
+    };
+    let (f1, f2) = MSF_DEFAULT_PER_MM;
+    let f2 = f2.min(py_r.freq_per_mm.last().copied().unwrap_or(f2));
+    let mech = mechanisms(&[("nominal_raster", band_rms(&py_r, f1, f2))]);
+    let bonnet_name = match bonnet {
+        Some(BonnetArg::Original) => "original".to_string(),
+        Some(BonnetArg::Suppression) => "suppression".to_string(),
+        None => recipe.process.bonnet.clone(),
+    };
+    let mut notes = vec!["vibration coupling is not included in this prediction".to_string()];
+    if recipe.pitch_mm.is_none() {
+        notes.push("no [path] pitch_mm: ripple not evaluated".into());
+    }
+    let t = tool.sampled();
+    let report = SimulationReport {
+        recipe: recipe_file.display().to_string(),
+        mode: if exact { "exact" } else { "fast" }.into(),
+        bonnet: bonnet_name,
+        removed: terms.to_vec(),
+        rms_before_nm: rms_b,
+        pv_before_nm: pv_b,
+        rms_after_nm: rms_a,
+        pv_after_nm: pv_a,
+        cr_rms: if rms_b > 0.0 {
+            (rms_b - rms_a) / rms_b
+        } else {
+            0.0
+        },
+        cr_pv: if pv_b > 0.0 {
+            (pv_b - pv_a) / pv_b
+        } else {
+            0.0
+        },
+        removal_mean_nm: removal_stats.mean_nm,
+        removal_rms_nm: removal_stats.rms_nm,
+        path_duration_s: path.duration_s(),
+        path_length_mm: path.length_mm(),
+        tif_peak_rate_nm_per_s: t.peak_rate_nm_per_s(),
+        tif_volume_rate_nm_mm2_per_s: t.volume_rate_nm_mm2_per_s(),
+        pitch_mm: recipe.pitch_mm,
+        ripple,
+        msf_band_per_mm: (f1, f2),
+        mechanisms: mech,
+        notes,
+    };
+    step("done");
+    bar.finish_and_clear();
+    Ok(Simulation {
+        report,
+        prediction,
+        before,
+        psd_y_after: py_a,
+        psd_y_before: py_b,
+    })
+}
+
+pub fn run(args: &Args) -> Result<(), CliError> {
+    let sim = simulate_recipe(&args.recipe, args.bonnet, args.exact)?;
+    write_outputs(&args.out, &sim)
+}
+
+/// Writes the maps, JSON and plots of a simulation into `dir`.
+pub fn write_outputs(dir: &Path, sim: &Simulation) -> Result<(), CliError> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| CliError::input(dir, format!("cannot create the output directory: {e}")))?;
+    let io = |e: bonnetlab_io::IoError| CliError {
+        code: e.exit_code(),
+        message: e.to_string(),
+    };
+    bonnetlab_io::write_surface(
+        &dir.join("predicted_after.dat"),
+        &sim.prediction.after,
+        MapFormat::MetroProDat,
+    )
+    .map_err(io)?;
+    bonnetlab_io::write_surface(
+        &dir.join("predicted_removal.dat"),
+        &sim.prediction.removal,
+        MapFormat::MetroProDat,
+    )
+    .map_err(io)?;
+    let werr = |e: report::write::WriteError| CliError::input(&e.file, e.what);
+    report::write::json(&dir.join("simulation.json"), &sim.report).map_err(werr)?;
+    let png =
+        |name: &str, bytes: Result<Vec<u8>, report::plot::PlotError>| -> Result<(), CliError> {
+            let bytes = bytes.map_err(|e| CliError::processing(dir.join(name), e.what))?;
+            report::write::bytes(&dir.join(name), &bytes).map_err(werr)
+        };
+    png(
+        "predicted_removal.png",
+        report::maps::false_colour_png(&sim.prediction.removal, "predicted removal", "nm"),
+    )?;
+    png(
+        "predicted_after.png",
+        report::maps::false_colour_png(&sim.prediction.after, "predicted after map", "nm"),
+    )?;
+    let positive = |p: &Psd1d| -> (Vec<f64>, Vec<f64>) {
+        p.freq_per_mm
+            .iter()
+            .zip(&p.psd_nm2_mm)
+            .filter(|(f, v)| **f > 0.0 && **v > 0.0)
+            .map(|(f, v)| (*f, *v))
+            .unzip()
+    };
+    let (fb, vb) = positive(&sim.psd_y_before);
+    let (fa, va) = positive(&sim.psd_y_after);
+    let mut plot = report::plot::LinePlot::new(
+        "PSD along Y (one-sided, Hann, piston+tilt removed)",
+        "frequency (1/mm)",
+        "PSD (nm^2 mm)",
+    )
+    .log_log()
+    .series(report::plot::Series::new("before", fb, vb))
+    .series(report::plot::Series::new("predicted after", fa, va));
+    if let Some(p) = sim.report.pitch_mm {
+        plot = plot.grating_markers(p, 3);
+    }
+    png("predicted_psd_y.png", plot.to_png())?;
+    Ok(())
 }

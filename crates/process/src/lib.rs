@@ -12,6 +12,7 @@ pub mod grid;
 pub mod path;
 pub mod recipe;
 pub mod removal;
+pub mod simulate;
 pub mod tif;
 
 pub use error::ProcessError;
