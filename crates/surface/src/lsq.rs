@@ -19,7 +19,7 @@ pub struct StreamingQr {
     p: usize,
     /// Row-major p x p; only the upper triangle is meaningful.
     r: Vec<f64>,
-    /// Pending rows, row-major, `pending` rows of `p`.
+    /// Pending rows, column-major: column j of the block is `block[j * block_rows..]`.
     block: Vec<f64>,
     pending: usize,
     block_rows: usize,
@@ -42,8 +42,10 @@ impl StreamingQr {
     /// Adds one row of the design matrix (`row.len() == p`).
     pub fn push_row(&mut self, row: &[f64]) {
         debug_assert_eq!(row.len(), self.p);
-        let at = self.pending * self.p;
-        self.block[at..at + self.p].copy_from_slice(row);
+        // Column-major block: the reflections below sweep whole columns contiguously.
+        for (j, &v) in row.iter().enumerate() {
+            self.block[j * self.block_rows + self.pending] = v;
+        }
         self.pending += 1;
         if self.pending == self.block_rows {
             self.flush();
@@ -59,15 +61,16 @@ impl StreamingQr {
     }
 
     fn flush(&mut self) {
-        let (p, m) = (self.p, self.pending);
+        let (p, m, stride) = (self.p, self.pending, self.block_rows);
         if m == 0 {
             return;
         }
         let b = &mut self.block;
-        let v = &mut self.scratch;
+        let v = &mut self.scratch[..m];
         for k in 0..p {
             let alpha = self.r[k * p + k];
-            let sigma: f64 = (0..m).map(|i| b[i * p + k] * b[i * p + k]).sum();
+            let col_k = &b[k * stride..k * stride + m];
+            let sigma: f64 = col_k.iter().map(|x| x * x).sum();
             if sigma == 0.0 {
                 continue;
             }
@@ -75,18 +78,17 @@ impl StreamingQr {
             let beta = if alpha >= 0.0 { -norm } else { norm };
             let v0 = alpha - beta;
             let tau = (beta - alpha) / beta;
-            for i in 0..m {
-                v[i] = b[i * p + k] / v0;
+            for (vi, &x) in v.iter_mut().zip(col_k) {
+                *vi = x / v0;
             }
             for j in k + 1..p {
-                let mut w = self.r[k * p + j];
-                for i in 0..m {
-                    w += v[i] * b[i * p + j];
-                }
-                w *= tau;
+                let col_j = &mut b[j * stride..j * stride + m];
+                let w = tau
+                    * (self.r[k * p + j]
+                        + v.iter().zip(col_j.iter()).map(|(a, c)| a * c).sum::<f64>());
                 self.r[k * p + j] -= w;
-                for i in 0..m {
-                    b[i * p + j] -= w * v[i];
+                for (c, &vi) in col_j.iter_mut().zip(v.iter()) {
+                    *c -= w * vi;
                 }
             }
             self.r[k * p + k] = beta;
