@@ -240,6 +240,28 @@ impl VibrationParams {
         Self::from_tables(vib, process, tif_radius)
     }
 
+    /// For callers holding an already-parsed recipe (bonnetlab_process::Recipe): the raw
+    /// `[vibration]` table plus the `[process]` values and the bonnet TIF radius, each optional.
+    pub fn from_parts(
+        vib: Option<&toml::Table>,
+        spindle_rpm: Option<f64>,
+        offset_mm: Option<f64>,
+        inner_pressure_mpa: Option<f64>,
+        tif_radius_mm: Option<f64>,
+    ) -> Result<Self, VibrationError> {
+        let mut process = toml::Table::new();
+        for (k, v) in [
+            ("spindle_rpm", spindle_rpm),
+            ("offset_mm", offset_mm),
+            ("inner_pressure_mpa", inner_pressure_mpa),
+        ] {
+            if let Some(v) = v {
+                process.insert(k.to_string(), toml::Value::Float(v));
+            }
+        }
+        Self::from_tables(vib, Some(&process), tif_radius_mm)
+    }
+
     /// Reads the `[vibration]` table with fall-backs from `[process]` and the TIF model radius.
     pub fn from_tables(
         vib: Option<&toml::Table>,
@@ -692,6 +714,18 @@ mod tests {
         assert_eq!(p.mass_kg, 50.0);
         assert_eq!(p.zeta1, 0.03);
         assert_eq!(p.mass_source, MassSource::Given);
+        let q = VibrationParams::from_parts(
+            doc.get("vibration").and_then(|v| v.as_table()),
+            Some(750.0),
+            Some(0.8),
+            None,
+            Some(25.0),
+        )
+        .unwrap();
+        assert_eq!(
+            (q.spindle_rpm, q.offset_mm, q.bonnet_radius_mm, q.mass_kg),
+            (750.0, 0.8, 25.0, 50.0)
+        );
         let bad: toml::Table = toml::from_str("[vibration]\nk1 = 3.0\n").unwrap();
         assert_eq!(
             VibrationParams::from_recipe(&bad).unwrap_err(),

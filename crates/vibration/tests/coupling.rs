@@ -195,3 +195,40 @@ fn suppression_bonnet_predicts_less_vibration_induced_msf_at_resonance() {
     );
     assert!(o.ripple_sigma1_nm.unwrap() > 0.0);
 }
+
+#[test]
+fn spindle_sweep_shows_the_resonance() {
+    // Fast method only; resonance of x2 at 558 rpm raises the vibration-induced MSF of the
+    // original bonnet above its off-resonance value, and the suppression bonnet stays lower.
+    let r = run_lines(9.0);
+    let params = VibrationParams { fn_n: 3.0, ..Default::default() };
+    let input = CouplingInput {
+        grid: r.grid,
+        valid: None,
+        base_tif: &r.tif,
+        path: &r.path,
+        params: &params,
+        pitch_mm: Some(3.0),
+    };
+    let opts = CouplingOptions {
+        mechanisms: Mechanisms { dwell_execution: false, ..Mechanisms::ALL },
+        sample_hz: 500.0,
+        ..Default::default()
+    };
+    let rows = bonnetlab_vibration::coupling::spindle_sweep(&input, &opts, &[558.0, 1500.0]).unwrap();
+    assert_eq!(rows.len(), 4);
+    for r in &rows {
+        eprintln!(
+            "{:>6.0} rpm {:<11} x2 {:.4} mm, induced MSF {:.5} nm",
+            r.spindle_rpm,
+            r.bonnet.name(),
+            r.x2_amplitude_mm,
+            r.induced_msf_band_rms_nm
+        );
+    }
+    let get = |rpm: f64, b: Bonnet| {
+        rows.iter().find(|r| r.spindle_rpm == rpm && r.bonnet == b).unwrap().induced_msf_band_rms_nm
+    };
+    assert!(get(558.0, Bonnet::Original) > get(1500.0, Bonnet::Original));
+    assert!(get(558.0, Bonnet::Suppression) < get(558.0, Bonnet::Original));
+}

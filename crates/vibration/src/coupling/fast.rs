@@ -9,18 +9,21 @@
 
 use super::instant::{InstantTif, Kernels};
 use super::splat::DwellChannels;
-use super::stream::SampleStream;
+use super::stream::{CouplingSample, SampleStream};
 use super::{CouplingInput, CouplingOptions, MechanismMaps, Mechanisms};
 use crate::error::VibrationError;
 use crate::params::Bonnet;
 use bonnetlab_process::fft::{fast_len, Fft2};
 use bonnetlab_process::path::kinematics::{apply_limits, Limits};
 use bonnetlab_process::path::PathLog;
+use bonnetlab_process::removal::{dwell_map_with, Splat};
 use bonnetlab_process::Grid;
 use ndarray::Array2;
 use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 
+/// Channel indices: W0 (cubic splat) is channel 0; the correction channels 1..=8 are splatted
+/// bilinearly (stored at index c − 1 of their own maps).
 const W0: usize = 0;
 const WU: usize = 1;
 const WUU: usize = 2;
@@ -31,6 +34,9 @@ const WNN: usize = 6;
 const WDN: usize = 7;
 const WUD: usize = 8;
 const NC: usize = 9;
+const NV: usize = NC - 1;
+/// Samples per message between the integrating and the splatting thread.
+const CHUNK: usize = 1 << 14;
 
 /// Kernel indices.
 const K0: usize = 0;
@@ -103,35 +109,61 @@ pub fn fast_maps(
 
     let mech = &opts.mechanisms;
     let exec = executed_path(input, mech)?;
-    let mut ch = DwellChannels::<NC>::new(ext);
-    for s in SampleStream::new(&exec, p, bonnet, mech, opts.sample_hz, opts.seed)? {
-        let d = s.delta_det_mm + s.delta_noise_mm;
-        let w = [
-            1.0,
-            s.u_mm,
-            s.u_mm * s.u_mm,
-            s.delta_det_mm,
-            s.delta_det_mm * s.delta_det_mm,
-            s.delta_noise_mm,
-            s.delta_noise_mm * s.delta_noise_mm,
-            s.delta_det_mm * s.delta_noise_mm,
-            s.u_mm * d,
-        ];
-        ch.add(s.x_mm, s.y_mm, s.dt_s, &w);
-    }
-    let commanded_w0 = if mech.dwell_execution {
-        let mut c = DwellChannels::<1>::new(ext);
-        for s in SampleStream::new(
-            input.path,
-            p,
-            bonnet,
-            &Mechanisms::NONE,
-            opts.sample_hz,
-            opts.seed,
-        )? {
-            c.add(s.x_mm, s.y_mm, s.dt_s, &[1.0]);
+    let any_vib = mech.normal_offset || mech.lateral_jitter || mech.envelope;
+    let mut ch0 = DwellChannels::<1>::new(ext);
+    let mut chv = DwellChannels::<NV>::new(if any_vib {
+        ext
+    } else {
+        Grid {
+            rows: 1,
+            cols: 1,
+            ..ext
         }
-        Some(c.channel(0))
+    });
+    // Two-stage pipeline: one thread integrates the vibration, this one splats its samples.
+    let stream = SampleStream::new(&exec, p, bonnet, mech, opts.sample_hz, opts.seed)?;
+    std::thread::scope(|scope| {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<CouplingSample>>(4);
+        scope.spawn(move || {
+            let mut buf = Vec::with_capacity(CHUNK);
+            for s in stream {
+                buf.push(s);
+                if buf.len() == CHUNK
+                    && tx
+                        .send(std::mem::replace(&mut buf, Vec::with_capacity(CHUNK)))
+                        .is_err()
+                {
+                    return;
+                }
+            }
+            let _ = tx.send(buf);
+        });
+        for chunk in rx {
+            for s in chunk {
+                ch0.add(s.x_mm, s.y_mm, s.dt_s, &[1.0]);
+                if !any_vib {
+                    continue;
+                }
+                let d = s.delta_det_mm + s.delta_noise_mm;
+                let w = [
+                    s.u_mm,
+                    s.u_mm * s.u_mm,
+                    s.delta_det_mm,
+                    s.delta_det_mm * s.delta_det_mm,
+                    s.delta_noise_mm,
+                    s.delta_noise_mm * s.delta_noise_mm,
+                    s.delta_det_mm * s.delta_noise_mm,
+                    s.u_mm * d,
+                ];
+                chv.add_bilinear(s.x_mm, s.y_mm, s.dt_s, &w);
+            }
+        }
+    });
+    // The commanded dwell carries no vibration weight: bonnetlab_process's own cubic splat of
+    // the path in half-pixel sub-steps gives it without a 1 kHz pass.
+    let commanded_w0 = if mech.dwell_execution {
+        let d = dwell_map_with(input.path, None, &ext, Splat::Cubic);
+        Some(d.iter().copied().collect::<Vec<f64>>())
     } else {
         None
     };
@@ -167,7 +199,14 @@ pub fn fast_maps(
         if mine.is_empty() {
             continue;
         }
-        let data = ch.channel(c);
+        if c > 0 && !any_vib {
+            continue;
+        }
+        let data = if c == 0 {
+            ch0.channel(0)
+        } else {
+            chv.channel(c - 1)
+        };
         if data.iter().all(|&v| v == 0.0) {
             continue;
         }

@@ -11,6 +11,7 @@
 //!   (through the rate's curvature in h) changes removal from line to line;
 //! - `dwell_execution`: the acceleration-limited robot re-times the commanded path, so the
 //!   realised dwell differs from the planned one.
+//!
 //! Cross terms between mechanisms are kept in `interaction`.
 //!
 //! [`fast`] evaluates a second-order expansion with FFT convolutions of weighted dwell maps;

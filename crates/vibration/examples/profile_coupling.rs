@@ -1,0 +1,78 @@
+//! Stage timings of the fast coupling on the bench case (100 x 100 mm at 0.1 mm, 60-min raster,
+//! 1 kHz): `cargo run --release -p bonnetlab-vibration --example profile_coupling`.
+
+use bonnetlab_process::path::RasterSpec;
+use bonnetlab_process::tif::GaussianTif;
+use bonnetlab_process::Grid;
+use bonnetlab_vibration::coupling::fast::executed_path;
+use bonnetlab_vibration::coupling::instant::{InstantTif, Kernels};
+use bonnetlab_vibration::coupling::splat::DwellChannels;
+use bonnetlab_vibration::coupling::stream::SampleStream;
+use bonnetlab_vibration::coupling::{fast_maps, CouplingInput, CouplingOptions, Mechanisms};
+use bonnetlab_vibration::params::{Bonnet, VibrationParams};
+use std::time::Instant;
+
+fn main() {
+    let grid = Grid::new(1001, 1001, 0.1, 0.1, 0.0, 0.0).expect("grid");
+    let tif = GaussianTif::new(2.0, 10.0, 10.0).expect("tif");
+    let mut spec = RasterSpec::over_rect((0.0, 100.0), (0.0, 100.0), 3.0, 1.16);
+    spec.overtravel_mm = 10.0;
+    let path = spec.generate().expect("path");
+    let params = VibrationParams::default();
+    let input = CouplingInput {
+        grid,
+        valid: None,
+        base_tif: &tif,
+        path: &path,
+        params: &params,
+        pitch_mm: Some(3.0),
+    };
+    let opts = CouplingOptions::default();
+    let t = Instant::now();
+    let inst = InstantTif::new(&tif, &params);
+    let k = Kernels::sample(&inst, 0.1, 0.1, params.lateral_axis);
+    eprintln!("kernels {:?} ({:?})", t.elapsed(), k.k0.dim());
+    let t = Instant::now();
+    let exec = executed_path(&input, &Mechanisms::ALL).expect("exec");
+    eprintln!("executed path {:?} ({} nodes)", t.elapsed(), exec.len());
+    let t = Instant::now();
+    let mut n = 0usize;
+    let mut acc = 0.0;
+    for s in SampleStream::new(
+        &exec,
+        &params,
+        Bonnet::Original,
+        &Mechanisms::ALL,
+        1000.0,
+        1,
+    )
+    .expect("stream")
+    {
+        n += 1;
+        acc += s.u_mm;
+    }
+    eprintln!("stream {:?} ({n} samples, {acc:.3e})", t.elapsed());
+    let t = Instant::now();
+    let ext = grid.grown(k.half.0, k.half.1);
+    let mut c0 = DwellChannels::<1>::new(ext);
+    let mut c8 = DwellChannels::<8>::new(ext);
+    for s in SampleStream::new(
+        &exec,
+        &params,
+        Bonnet::Original,
+        &Mechanisms::ALL,
+        1000.0,
+        1,
+    )
+    .expect("stream")
+    {
+        c0.add(s.x_mm, s.y_mm, s.dt_s, &[1.0]);
+        c8.add_bilinear(s.x_mm, s.y_mm, s.dt_s, &[s.u_mm; 8]);
+    }
+    eprintln!("stream + splat {:?}", t.elapsed());
+    for _ in 0..2 {
+        let t = Instant::now();
+        let m = fast_maps(&input, Bonnet::Original, &opts).expect("fast");
+        eprintln!("fast_maps total {:?} ({:?})", t.elapsed(), m.baseline.dim());
+    }
+}
