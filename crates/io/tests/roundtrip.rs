@@ -72,7 +72,10 @@ fn dat_round_trip_is_within_half_a_count() {
     assert!((r.origin_mm.0 - 0.5).abs() < 1e-6 && (r.origin_mm.1 - 1.0).abs() < 1e-6);
     assert_eq!(r.provenance.objective.as_deref(), Some("Sm Aperture"));
     assert_eq!(r.provenance.comment.as_deref(), Some("round trip"));
-    assert_eq!(r.provenance.software, None, "we do not claim to be Zygo software");
+    assert_eq!(
+        r.provenance.software, None,
+        "we do not claim to be Zygo software"
+    );
     assert_eq!(r.provenance.wavelength_m, Some(f64::from(632.8e-9f32)));
 }
 
