@@ -3,7 +3,8 @@
 //!
 //! The paraboloid `z = c0 + c1 u + c2 v + c3 u^2 + c4 u v + c5 v^2` is fitted by least squares
 //! to the valid pixels removed by at least `TOP_FRACTION` of the smoothed peak within
-//! `radius_mm` of the starting point; its vertex is the spot centre and its value there the peak
+//! `radius_mm` of the starting point, then again on the pixels above `REFINE_FRACTION` of the
+//! first peak about the first vertex; its vertex is the spot centre and its value there the peak
 //! removal, when the fit is concave and the vertex lies inside the fitted region. Otherwise
 //! (flat-topped or ring-shaped spots) the caller falls back to the centroid and the smoothed
 //! maximum.
@@ -14,8 +15,11 @@ use bonnetlab_surface::Surface;
 
 use crate::linalg::least_squares;
 
-/// Pixels at or above this fraction of the smoothed peak enter the paraboloid fit.
+/// Pixels at or above this fraction of the smoothed peak enter the first paraboloid fit.
 pub const TOP_FRACTION: f64 = 0.85;
+/// The second fit, about the first vertex, keeps the pixels above this fraction of the first
+/// peak: a smaller cap moves the vertex less towards the wide side of a lopsided spot.
+pub const REFINE_FRACTION: f64 = 0.92;
 
 /// How the centre and peak were found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]

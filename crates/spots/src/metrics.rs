@@ -27,7 +27,9 @@ use crate::background::{
     fit_background, frame_mask, removal_after_plane, MapKind, Ring, RING_INNER_PER_R5,
     RING_OUTER_PER_R5,
 };
-use crate::centre::{centroid, paraboloid_peak, smoothed_max, CentreMethod, TOP_FRACTION};
+use crate::centre::{
+    centroid, paraboloid_peak, smoothed_max, CentreMethod, REFINE_FRACTION, TOP_FRACTION,
+};
 use crate::error::SpotsError;
 use crate::profile::crossing;
 
@@ -165,7 +167,7 @@ pub fn measure_spot(
     let top = paraboloid_peak(&removal, start, r5, TOP_FRACTION * smooth_peak).and_then(
         |(x, y, p, _)| {
             // Refit about the vertex so the cap is centred on the data it describes.
-            paraboloid_peak(&removal, (x, y), r5, TOP_FRACTION * p)
+            paraboloid_peak(&removal, (x, y), r5, REFINE_FRACTION * p)
         },
     );
     let (gx, gy, _) = centroid(&removal, 0.05 * smooth_peak, (rcx, rcy), inner)
