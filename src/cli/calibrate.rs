@@ -37,30 +37,42 @@ pub struct Args {
 }
 
 fn read_map(path: &Path) -> Result<Surface, CliError> {
-    bonnetlab_io::read_surface(path).map_err(|e| CliError { code: e.exit_code(), message: e.to_string() })
+    bonnetlab_io::read_surface(path).map_err(|e| CliError {
+        code: e.exit_code(),
+        message: e.to_string(),
+    })
 }
 
 /// Loads the run and returns the prepared problem.
 pub fn load(recipe_path: &Path) -> Result<Problem, CliError> {
     let recipe = Recipe::load(recipe_path).map_err(|e| CliError::input(recipe_path, e))?;
     let before = read_map(&recipe.before)?;
-    let after_path = recipe
-        .after
-        .clone()
-        .ok_or_else(|| CliError::input(recipe_path, "[measurement] after: missing (calibrate needs the after map)"))?;
+    let after_path = recipe.after.clone().ok_or_else(|| {
+        CliError::input(
+            recipe_path,
+            "[measurement] after: missing (calibrate needs the after map)",
+        )
+    })?;
     let after = read_map(&after_path)?;
-    let (dx, dy) = before.pixel_mm("calibration").map_err(|e| CliError::input(&recipe.before, e))?;
+    let (dx, dy) = before
+        .pixel_mm("calibration")
+        .map_err(|e| CliError::input(&recipe.before, e))?;
     let tif = match &recipe.tif {
         TifSource::Spot { path, dwell_s } => {
             let spot = read_map(path)?;
             Tif::from_spot(&spot, *dwell_s).map_err(|e| CliError::input(path, e))?
         }
-        TifSource::Gaussian(g) => Tif::sample(g, dx, dy).map_err(|e| CliError::input(recipe_path, format!("[tif] model: {e}")))?,
-        TifSource::Bonnet(b) => Tif::bonnet(b, dx, dy).map_err(|e| CliError::input(recipe_path, format!("[tif] model: {e}")))?,
+        TifSource::Gaussian(g) => Tif::sample(g, dx, dy)
+            .map_err(|e| CliError::input(recipe_path, format!("[tif] model: {e}")))?,
+        TifSource::Bonnet(b) => Tif::bonnet(b, dx, dy)
+            .map_err(|e| CliError::input(recipe_path, format!("[tif] model: {e}")))?,
     };
-    let tif = TifMap::new(tif.rate_nm_per_s, tif.dx_mm, tif.dy_mm).map_err(|e| CliError::input(recipe_path, format!("[tif]: {e}")))?;
-    let log = bonnetlab_process::path::read_path_csv(&recipe.path_log).map_err(|e| CliError::input(&recipe.path_log, e))?;
-    let path = PathLog::new(log.t_s, log.x_mm, log.y_mm).map_err(|e| CliError::input(&recipe.path_log, e))?;
+    let tif = TifMap::new(tif.rate_nm_per_s, tif.dx_mm, tif.dy_mm)
+        .map_err(|e| CliError::input(recipe_path, format!("[tif]: {e}")))?;
+    let log = bonnetlab_process::path::read_path_csv(&recipe.path_log)
+        .map_err(|e| CliError::input(&recipe.path_log, e))?;
+    let path = PathLog::new(log.t_s, log.x_mm, log.y_mm)
+        .map_err(|e| CliError::input(&recipe.path_log, e))?;
     Problem::new(&before, &after, &tif, &path).map_err(|e| match e {
         CalibrateError::Processing(m) => CliError::processing(recipe_path, m),
         other => CliError::input(recipe_path, other),
@@ -69,18 +81,25 @@ pub fn load(recipe_path: &Path) -> Result<Problem, CliError> {
 
 pub fn run(args: &Args) -> Result<(), CliError> {
     let problem = load(&args.recipe)?;
-    let cal = calibrate(&problem, &Options::default()).map_err(|e| CliError::processing(&args.recipe, e))?;
-    let text = serde_json::to_string_pretty(&cal).map_err(|e| CliError::processing(&args.recipe, e))? + "\n";
+    let cal = calibrate(&problem, &Options::default())
+        .map_err(|e| CliError::processing(&args.recipe, e))?;
+    let text = serde_json::to_string_pretty(&cal)
+        .map_err(|e| CliError::processing(&args.recipe, e))?
+        + "\n";
     if let Some(out) = &args.json {
-        bonnetlab_io::atomic::write_atomic(out, text.as_bytes()).map_err(|e| CliError::input(out, format!("cannot write: {e}")))?;
+        bonnetlab_io::atomic::write_atomic(out, text.as_bytes())
+            .map_err(|e| CliError::input(out, format!("cannot write: {e}")))?;
     }
     if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir).map_err(|e| CliError::input(dir, format!("cannot create directory: {e}")))?;
+        std::fs::create_dir_all(dir)
+            .map_err(|e| CliError::input(dir, format!("cannot create directory: {e}")))?;
         let j = dir.join("calibration.json");
-        bonnetlab_io::atomic::write_atomic(&j, text.as_bytes()).map_err(|e| CliError::input(&j, format!("cannot write: {e}")))?;
+        bonnetlab_io::atomic::write_atomic(&j, text.as_bytes())
+            .map_err(|e| CliError::input(&j, format!("cannot write: {e}")))?;
         let html = report_html(&cal, &args.recipe).map_err(|e| CliError::processing(dir, e))?;
         let h = dir.join("report.html");
-        bonnetlab_io::atomic::write_atomic(&h, html.as_bytes()).map_err(|e| CliError::input(&h, format!("cannot write: {e}")))?;
+        bonnetlab_io::atomic::write_atomic(&h, html.as_bytes())
+            .map_err(|e| CliError::input(&h, format!("cannot write: {e}")))?;
     }
     if args.json.is_none() && args.out.is_none() {
         print!("{text}");
@@ -91,7 +110,11 @@ pub fn run(args: &Args) -> Result<(), CliError> {
 fn fmt_param(v: &serde_json::Value, u: Option<&serde_json::Value>) -> String {
     match (v, u) {
         (serde_json::Value::Number(n), Some(serde_json::Value::Number(s))) => {
-            format!("{:.5} ± {:.2e}", n.as_f64().unwrap_or(f64::NAN), s.as_f64().unwrap_or(f64::NAN))
+            format!(
+                "{:.5} ± {:.2e}",
+                n.as_f64().unwrap_or(f64::NAN),
+                s.as_f64().unwrap_or(f64::NAN)
+            )
         }
         (serde_json::Value::Number(n), _) => format!("{:.5}", n.as_f64().unwrap_or(f64::NAN)),
         (serde_json::Value::String(s), _) => s.clone(),
@@ -106,16 +129,39 @@ fn surface_of(m: &(Array2<f64>, Array2<bool>), dx: f64, dy: f64) -> Option<Surfa
 /// The HTML section of a calibration (self-contained page).
 pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
     let mut page = Page::new("Calibration: predicted vs measured removal");
-    page.paragraph(&format!("Recipe: {}", escape(&recipe.display().to_string())));
+    page.paragraph(&format!(
+        "Recipe: {}",
+        escape(&recipe.display().to_string())
+    ));
     page.section("Error before and after");
     let mut t = Table::new(["stage", "residual RMS (nm)", "residual PV (nm)"]);
-    t.row(["measured removal (piston, tilt removed)".to_string(), format!("{:.4}", cal.baseline.measured_removal_rms_nm), String::new()]);
-    t.row(["baseline (process model, global rate fit)".to_string(), format!("{:.4}", cal.baseline.residual_rms_nm), format!("{:.4}", cal.baseline.residual_pv_nm)]);
+    t.row([
+        "measured removal (piston, tilt removed)".to_string(),
+        format!("{:.4}", cal.baseline.measured_removal_rms_nm),
+        String::new(),
+    ]);
+    t.row([
+        "baseline (process model, global rate fit)".to_string(),
+        format!("{:.4}", cal.baseline.residual_rms_nm),
+        format!("{:.4}", cal.baseline.residual_pv_nm),
+    ]);
     for e in &cal.effects {
-        t.row([format!("+ {}", e.kind), format!("{:.4}", e.residual_rms_after_nm), String::new()]);
+        t.row([
+            format!("+ {}", e.kind),
+            format!("{:.4}", e.residual_rms_after_nm),
+            String::new(),
+        ]);
     }
-    t.row(["final (joint refit)".to_string(), format!("{:.4}", cal.final_.residual_rms_nm), format!("{:.4}", cal.final_.residual_pv_nm)]);
-    t.row(["noise floor (from the maps)".to_string(), format!("{:.4}", cal.noise_floor_rms_nm), String::new()]);
+    t.row([
+        "final (joint refit)".to_string(),
+        format!("{:.4}", cal.final_.residual_rms_nm),
+        format!("{:.4}", cal.final_.residual_pv_nm),
+    ]);
+    t.row([
+        "noise floor (from the maps)".to_string(),
+        format!("{:.4}", cal.noise_floor_rms_nm),
+        String::new(),
+    ]);
     page.table(&t);
     page.note("Residual RMS over the common valid aperture after fitting piston and tilt (the measurement's set-up terms).");
 
@@ -123,10 +169,20 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
     if cal.effects.is_empty() {
         page.paragraph("No effect is significant on held-out data: the baseline model explains the run to the noise.");
     } else {
-        let mut t = Table::new(["kind", "parameters (± 1 sigma)", "RMS before (nm)", "RMS after (nm)", "hold-out z", "hold-out reduction"]);
+        let mut t = Table::new([
+            "kind",
+            "parameters (± 1 sigma)",
+            "RMS before (nm)",
+            "RMS after (nm)",
+            "hold-out z",
+            "hold-out reduction",
+        ]);
         for e in &cal.effects {
-            let params: Vec<String> =
-                e.params.iter().map(|(k, v)| format!("{k} = {}", fmt_param(v, e.uncertainties.get(k)))).collect();
+            let params: Vec<String> = e
+                .params
+                .iter()
+                .map(|(k, v)| format!("{k} = {}", fmt_param(v, e.uncertainties.get(k))))
+                .collect();
             t.row([
                 e.kind.clone(),
                 params.join("; "),
@@ -144,14 +200,21 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
     } else {
         let mut t = Table::new(["description", "band (1/mm)", "RMS (nm)"]);
         for u in &cal.unexplained {
-            t.row([u.description.clone(), format!("{:.4} - {:.4}", u.band_per_mm[0], u.band_per_mm[1]), format!("{:.4}", u.rms_nm)]);
+            t.row([
+                u.description.clone(),
+                format!("{:.4} - {:.4}", u.band_per_mm[0], u.band_per_mm[1]),
+                format!("{:.4}", u.rms_nm),
+            ]);
         }
         page.table(&t);
     }
     page.section("Maps");
     let (dx, dy) = (cal.maps.dx_mm, cal.maps.dy_mm);
     for (m, title) in [
-        (&cal.maps.measured_removal_nm, "Measured removal (before - after)"),
+        (
+            &cal.maps.measured_removal_nm,
+            "Measured removal (before - after)",
+        ),
         (&cal.maps.baseline_residual_nm, "Residual, baseline"),
         (&cal.maps.final_residual_nm, "Residual, final"),
     ] {
@@ -162,25 +225,50 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
     }
     page.section("Residual PSDs (one-sided, nm^2 mm, Hann)");
     for (along_x, name) in [(true, "X (scan)"), (false, "Y (feed)")] {
-        let mut plot = LinePlot::new(format!("Residual PSD along {name}"), "frequency (1/mm)", "PSD (nm^2 mm)").log_log();
-        for (m, label) in [(&cal.maps.baseline_residual_nm, "baseline"), (&cal.maps.final_residual_nm, "final")] {
+        let mut plot = LinePlot::new(
+            format!("Residual PSD along {name}"),
+            "frequency (1/mm)",
+            "PSD (nm^2 mm)",
+        )
+        .log_log();
+        for (m, label) in [
+            (&cal.maps.baseline_residual_nm, "baseline"),
+            (&cal.maps.final_residual_nm, "final"),
+        ] {
             if let Some(m) = m {
                 let p = psd_1d(&m.0, &m.1, if along_x { dx } else { dy }, along_x);
-                let (f, s): (Vec<f64>, Vec<f64>) =
-                    p.freq_per_mm.iter().zip(&p.psd_nm2_mm).skip(1).filter(|(_, v)| **v > 0.0).map(|(a, b)| (*a, *b)).unzip();
+                let (f, s): (Vec<f64>, Vec<f64>) = p
+                    .freq_per_mm
+                    .iter()
+                    .zip(&p.psd_nm2_mm)
+                    .skip(1)
+                    .filter(|(_, v)| **v > 0.0)
+                    .map(|(a, b)| (*a, *b))
+                    .unzip();
                 plot = plot.series(Series::new(label, f, s));
             }
         }
         let svg = plot.to_svg().map_err(|e| e.what)?;
-        page.svg(&svg, &format!("Residual PSD along {name}, baseline vs final"));
+        page.svg(
+            &svg,
+            &format!("Residual PSD along {name}, baseline vs final"),
+        );
     }
     page.section("Diagnosis trail (hold-out z of the three best candidates per round)");
     let mut t = Table::new(["round", "accepted", "best candidates"]);
     for (i, r) in cal.rounds.iter().enumerate() {
         let mut c = r.candidates.clone();
         c.sort_by(|a, b| b.z.total_cmp(&a.z));
-        let best: Vec<String> = c.iter().take(3).map(|c| format!("{} (z {:.1})", c.key, c.z)).collect();
-        t.row([format!("{}", i + 1), r.accepted.clone().unwrap_or_else(|| "none".into()), best.join(", ")]);
+        let best: Vec<String> = c
+            .iter()
+            .take(3)
+            .map(|c| format!("{} (z {:.1})", c.key, c.z))
+            .collect();
+        t.row([
+            format!("{}", i + 1),
+            r.accepted.clone().unwrap_or_else(|| "none".into()),
+            best.join(", "),
+        ]);
     }
     page.table(&t);
     Ok(page.render())

@@ -5,7 +5,13 @@ use bonnetlab_calibrate::synth::{generate, Injected, SynthConfig};
 use bonnetlab_calibrate::tif::TifMap;
 
 fn main() {
-    let cfg = SynthConfig { effects: vec![Injected::TifScale { scale: 1.12 }], seed: 11, noise_nm: 0.0, spot_noise_nm: 0.0, ..SynthConfig::default() };
+    let cfg = SynthConfig {
+        effects: vec![Injected::TifScale { scale: 1.12 }],
+        seed: 11,
+        noise_nm: 0.0,
+        spot_noise_nm: 0.0,
+        ..SynthConfig::default()
+    };
     let run = generate(&cfg).unwrap();
     let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).unwrap();
     let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();

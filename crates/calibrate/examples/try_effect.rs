@@ -9,23 +9,79 @@ fn main() {
     let which = std::env::args().nth(1).unwrap_or_else(|| "none".into());
     let eff = match which.as_str() {
         "none" => vec![],
-        "reg" => vec![Injected::Registration { dx_mm: 0.35, dy_mm: -0.2, rotation_deg: 0.15 }],
-        "drift" => vec![Injected::RateDrift { fraction_per_run: -0.25 }],
+        "reg" => vec![Injected::Registration {
+            dx_mm: 0.35,
+            dy_mm: -0.2,
+            rotation_deg: 0.15,
+        }],
+        "drift" => vec![Injected::RateDrift {
+            fraction_per_run: -0.25,
+        }],
         "scale" => vec![Injected::TifScale { scale: 1.12 }],
         "lag" => vec![Injected::DirectionLag { lag_mm: 0.4 }],
-        "wiggle" => vec![Injected::PeriodicPathError { axis_x: false, amplitude_mm: 0.3, period_mm: 12.0, phase_rad: 0.5, coord: WiggleCoord::X, waveform: Waveform::Sine }],
-        "cov" => vec![Injected::RateCovariate { covariate: "height".into(), coefficient: 0.004 }],
-        "osc" => vec![Injected::RateOscillation { amplitude_fraction: 0.15, period_s: 300.0 }],
-        "step" => vec![Injected::RateStep { at_tau: 0.4, fraction: 0.2 }],
-        "defect" => vec![Injected::LocalDefect { x_mm: 30.0, y_mm: 50.0, radius_mm: 2.0, depth_nm: 6.0 }],
-        "tri" => vec![Injected::PeriodicPathError { axis_x: true, amplitude_mm: 0.3, period_mm: 15.0, phase_rad: 0.0, coord: WiggleCoord::Arc, waveform: Waveform::Triangle }],
-        "two" => vec![Injected::RateDrift { fraction_per_run: 0.2 }, Injected::Registration { dx_mm: -0.3, dy_mm: 0.25, rotation_deg: 0.0 }],
+        "wiggle" => vec![Injected::PeriodicPathError {
+            axis_x: false,
+            amplitude_mm: 0.3,
+            period_mm: 12.0,
+            phase_rad: 0.5,
+            coord: WiggleCoord::X,
+            waveform: Waveform::Sine,
+        }],
+        "cov" => vec![Injected::RateCovariate {
+            covariate: "height".into(),
+            coefficient: 0.004,
+        }],
+        "osc" => vec![Injected::RateOscillation {
+            amplitude_fraction: 0.15,
+            period_s: 300.0,
+        }],
+        "step" => vec![Injected::RateStep {
+            at_tau: 0.4,
+            fraction: 0.2,
+        }],
+        "defect" => vec![Injected::LocalDefect {
+            x_mm: 30.0,
+            y_mm: 50.0,
+            radius_mm: 2.0,
+            depth_nm: 6.0,
+        }],
+        "tri" => vec![Injected::PeriodicPathError {
+            axis_x: true,
+            amplitude_mm: 0.3,
+            period_mm: 15.0,
+            phase_rad: 0.0,
+            coord: WiggleCoord::Arc,
+            waveform: Waveform::Triangle,
+        }],
+        "two" => vec![
+            Injected::RateDrift {
+                fraction_per_run: 0.2,
+            },
+            Injected::Registration {
+                dx_mm: -0.3,
+                dy_mm: 0.25,
+                rotation_deg: 0.0,
+            },
+        ],
         _ => panic!("unknown"),
     };
-    let cfg = SynthConfig { effects: eff, seed: 11, ..SynthConfig::default() };
+    let seed = std::env::var("SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(11);
+    let cfg = SynthConfig {
+        effects: eff,
+        seed,
+        ..SynthConfig::default()
+    };
     let t = std::time::Instant::now();
     let run = generate(&cfg).unwrap();
-    eprintln!("generate {:?}, path {} samples, duration {:.0}s", t.elapsed(), run.path.len(), run.path.duration_s());
+    eprintln!(
+        "generate {:?}, path {} samples, duration {:.0}s",
+        t.elapsed(),
+        run.path.len(),
+        run.path.duration_s()
+    );
     let t = std::time::Instant::now();
     let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).unwrap();
     let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();

@@ -242,7 +242,11 @@ mod tests {
                         }
                     }
                 }
-                assert!((out[(i, j)] - s).abs() < 1e-9, "({i},{j}) {} vs {s}", out[(i, j)]);
+                assert!(
+                    (out[(i, j)] - s).abs() < 1e-9,
+                    "({i},{j}) {} vs {s}",
+                    out[(i, j)]
+                );
             }
         }
     }
@@ -253,7 +257,9 @@ mod tests {
         let conv = Convolver::new(rows, cols, hr, hc);
         let (er, ec) = conv.ext_dim();
         let r = Array2::from_shape_fn((rows, cols), |(i, j)| ((i * 5 + j * 2) % 7) as f64 - 2.0);
-        let k = Array2::from_shape_fn((2 * hr + 1, 2 * hc + 1), |(i, j)| i as f64 * 0.3 + j as f64 - 0.7);
+        let k = Array2::from_shape_fn((2 * hr + 1, 2 * hc + 1), |(i, j)| {
+            i as f64 * 0.3 + j as f64 - 0.7
+        });
         let c = conv.correlate(&r, &conv.kernel_spectrum(&k));
         for e in 0..er {
             for f in 0..ec {
@@ -268,7 +274,11 @@ mod tests {
                         }
                     }
                 }
-                assert!((c[(e, f)] - s).abs() < 1e-9, "({e},{f}) {} vs {s}", c[(e, f)]);
+                assert!(
+                    (c[(e, f)] - s).abs() < 1e-9,
+                    "({e},{f}) {} vs {s}",
+                    c[(e, f)]
+                );
             }
         }
     }

@@ -87,14 +87,20 @@ pub fn sample(g: &MapGrid, a: &Array2<f64>, x: f64, y: f64) -> f64 {
 pub fn smooth_masked(a: &Array2<f64>, valid: &Array2<bool>, sigma_px: f64) -> Array2<f64> {
     let (r, c) = a.dim();
     let h = (4.0 * sigma_px).ceil().max(1.0) as isize;
-    let w: Vec<f64> = (-h..=h).map(|k| (-(k * k) as f64 / (2.0 * sigma_px * sigma_px)).exp()).collect();
+    let w: Vec<f64> = (-h..=h)
+        .map(|k| (-(k * k) as f64 / (2.0 * sigma_px * sigma_px)).exp())
+        .collect();
     let num0 = Array2::from_shape_fn((r, c), |(i, j)| if valid[(i, j)] { a[(i, j)] } else { 0.0 });
     let den0 = valid.mapv(|v| if v { 1.0 } else { 0.0 });
     let pass = |m: &Array2<f64>, along_cols: bool| -> Array2<f64> {
         Array2::from_shape_fn((r, c), |(i, j)| {
             let mut s = 0.0;
             for (t, wk) in (-h..=h).zip(&w) {
-                let (ii, jj) = if along_cols { (i as isize, j as isize + t) } else { (i as isize + t, j as isize) };
+                let (ii, jj) = if along_cols {
+                    (i as isize, j as isize + t)
+                } else {
+                    (i as isize + t, j as isize)
+                };
                 if ii >= 0 && jj >= 0 && (ii as usize) < r && (jj as usize) < c {
                     s += wk * m[(ii as usize, jj as usize)];
                 }
@@ -134,7 +140,8 @@ fn dt1(f: &[f64]) -> Vec<f64> {
         }
         loop {
             let p = v[k];
-            let s = ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64));
+            let s =
+                ((f[q] + (q * q) as f64) - (f[p] + (p * p) as f64)) / (2.0 * (q as f64 - p as f64));
             if s <= z[k] && k > 0 {
                 k -= 1;
             } else {
@@ -163,7 +170,9 @@ fn edt_mm(site: &Array2<bool>, dx: f64, dy: f64) -> Array2<f64> {
     // Rows in pixel units of x, then columns with the y scale folded in.
     let mut g = Array2::<f64>::zeros((r, c));
     for i in 0..r {
-        let f: Vec<f64> = (0..c).map(|j| if site[(i, j)] { 0.0 } else { f64::INFINITY }).collect();
+        let f: Vec<f64> = (0..c)
+            .map(|j| if site[(i, j)] { 0.0 } else { f64::INFINITY })
+            .collect();
         let d = dt1(&f);
         for j in 0..c {
             g[(i, j)] = d[j] * dx * dx;
@@ -196,7 +205,12 @@ pub fn signed_edge_distance(valid: &Array2<bool>, dx: f64, dy: f64) -> Array2<f6
     };
     outside[(0, 0)] = true;
     while let Some((i, j)) = stack.pop() {
-        let nb = [(i.wrapping_sub(1), j), (i + 1, j), (i, j.wrapping_sub(1)), (i, j + 1)];
+        let nb = [
+            (i.wrapping_sub(1), j),
+            (i + 1, j),
+            (i, j.wrapping_sub(1)),
+            (i, j + 1),
+        ];
         for (a, b) in nb {
             if a < pr && b < pc && !outside[(a, b)] && is_invalid(a, b) {
                 outside[(a, b)] = true;
@@ -223,7 +237,14 @@ mod tests {
 
     #[test]
     fn splat_conserves_weight_and_centroid() {
-        let g = MapGrid { rows: 10, cols: 12, dx_mm: 0.5, dy_mm: 0.25, x0_mm: 1.0, y0_mm: -1.0 };
+        let g = MapGrid {
+            rows: 10,
+            cols: 12,
+            dx_mm: 0.5,
+            dy_mm: 0.25,
+            x0_mm: 1.0,
+            y0_mm: -1.0,
+        };
         let d = splat(&g, 2, 3, &[2.3], &[0.1], &[4.0]);
         let tot: f64 = d.sum();
         assert!((tot - 4.0).abs() < 1e-12);

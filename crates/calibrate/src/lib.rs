@@ -8,13 +8,13 @@ pub mod path;
 pub mod tif;
 
 pub use error::CalibrateError;
-pub mod synth;
+pub mod effects;
 pub mod lsq;
 pub mod model;
-pub mod effects;
-pub mod selection;
 pub mod noise;
 pub mod psd;
 pub mod refine;
 pub mod run;
+pub mod selection;
+pub mod synth;
 pub mod unexplained;

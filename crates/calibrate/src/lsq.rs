@@ -4,7 +4,12 @@
 
 /// Weighted Gram matrix `G[a][b] = sum_i w_i c_a[i] c_b[i]` and `rhs[a] = sum_i w_i c_a[i] m_i`
 /// over the pixels where `sel` is true (all when `None`).
-pub fn gram(cols: &[&[f64]], m: &[f64], w: &[f64], sel: Option<&[bool]>) -> (Vec<Vec<f64>>, Vec<f64>) {
+pub fn gram(
+    cols: &[&[f64]],
+    m: &[f64],
+    w: &[f64],
+    sel: Option<&[bool]>,
+) -> (Vec<Vec<f64>>, Vec<f64>) {
     let n = cols.len();
     let mut g = vec![vec![0.0; n]; n];
     let mut rhs = vec![0.0; n];
@@ -48,13 +53,25 @@ pub fn gram(cols: &[&[f64]], m: &[f64], w: &[f64], sel: Option<&[bool]>) -> (Vec
 /// split, the fitted values are unaffected). Returns None on a non-finite system.
 pub fn solve(g: &[Vec<f64>], rhs: &[f64]) -> Option<Vec<f64>> {
     let inv = inverse(g)?;
-    Some((0..rhs.len()).map(|a| (0..rhs.len()).map(|b| inv[a][b] * rhs[b]).sum()).collect())
+    Some(
+        (0..rhs.len())
+            .map(|a| (0..rhs.len()).map(|b| inv[a][b] * rhs[b]).sum())
+            .collect(),
+    )
 }
 
 /// Inverse of a symmetric PSD matrix (equilibrated, tiny ridge), by Gauss-Jordan with pivoting.
 pub fn inverse(g: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
     let n = g.len();
-    let d: Vec<f64> = (0..n).map(|a| if g[a][a] > 0.0 { 1.0 / g[a][a].sqrt() } else { 1.0 }).collect();
+    let d: Vec<f64> = (0..n)
+        .map(|a| {
+            if g[a][a] > 0.0 {
+                1.0 / g[a][a].sqrt()
+            } else {
+                1.0
+            }
+        })
+        .collect();
     let mut a: Vec<Vec<f64>> = (0..n)
         .map(|i| {
             let mut row: Vec<f64> = (0..n).map(|j| g[i][j] * d[i] * d[j]).collect();
@@ -84,7 +101,9 @@ pub fn inverse(g: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
             }
         }
     }
-    let out: Vec<Vec<f64>> = (0..n).map(|i| (0..n).map(|j| a[i][n + j] * d[i] * d[j]).collect()).collect();
+    let out: Vec<Vec<f64>> = (0..n)
+        .map(|i| (0..n).map(|j| a[i][n + j] * d[i] * d[j]).collect())
+        .collect();
     if out.iter().flatten().all(|v| v.is_finite()) {
         Some(out)
     } else {
@@ -106,7 +125,9 @@ mod tests {
         let w = vec![1.0; n];
         let (g, r) = gram(&[&c0, &c1, &c2], &m, &w, None);
         let x = solve(&g, &r).unwrap();
-        assert!((x[0] - 2.0).abs() < 1e-6 && (x[1] + 0.5).abs() < 1e-8 && (x[2] - 3.0).abs() < 1e-8);
+        assert!(
+            (x[0] - 2.0).abs() < 1e-6 && (x[1] + 0.5).abs() < 1e-8 && (x[2] - 3.0).abs() < 1e-8
+        );
         // duplicate column: fitted values still exact
         let (g, r) = gram(&[&c0, &c1, &c1, &c2], &m, &w, None);
         let x = solve(&g, &r).unwrap();

@@ -91,7 +91,11 @@ pub struct Linear {
 
 impl Linear {
     pub fn get(&self, name: &str) -> f64 {
-        self.names.iter().position(|n| n == name).map(|i| self.coef[i]).unwrap_or(0.0)
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| self.coef[i])
+            .unwrap_or(0.0)
     }
 
     /// Baseline coefficient with the rate columns un-centred: the rate scale at g = 0.
@@ -115,7 +119,10 @@ pub struct Covariates {
 
 impl Covariates {
     pub fn get(&self, name: &str) -> Option<&[f64]> {
-        self.names.iter().position(|n| *n == name).map(|i| self.values[i].as_slice())
+        self.names
+            .iter()
+            .position(|n| *n == name)
+            .map(|i| self.values[i].as_slice())
     }
 }
 
@@ -149,7 +156,12 @@ pub struct Problem {
 }
 
 impl Problem {
-    pub fn new(before: &Surface, after: &Surface, tif: &TifMap, path: &PathLog) -> Result<Self, CalibrateError> {
+    pub fn new(
+        before: &Surface,
+        after: &Surface,
+        tif: &TifMap,
+        path: &PathLog,
+    ) -> Result<Self, CalibrateError> {
         let grid = MapGrid::of(before)?;
         if after.dim() != before.dim() {
             return Err(CalibrateError::InvalidInput(format!(
@@ -159,27 +171,48 @@ impl Problem {
             )));
         }
         let (adx, ady) = after.pixel_mm("calibration")?;
-        if (adx - grid.dx_mm).abs() > 1e-6 * grid.dx_mm || (ady - grid.dy_mm).abs() > 1e-6 * grid.dy_mm {
-            return Err(CalibrateError::InvalidInput("after and before maps differ in pixel size".into()));
+        if (adx - grid.dx_mm).abs() > 1e-6 * grid.dx_mm
+            || (ady - grid.dy_mm).abs() > 1e-6 * grid.dy_mm
+        {
+            return Err(CalibrateError::InvalidInput(
+                "after and before maps differ in pixel size".into(),
+            ));
         }
-        let radius = tif.support_radius_mm(0.005).max(2.0 * grid.dx_mm.max(grid.dy_mm));
+        let radius = tif
+            .support_radius_mm(0.005)
+            .max(2.0 * grid.dx_mm.max(grid.dy_mm));
         let tif = tif.cropped_to_radius(radius * 1.1);
         let hr = ((MAX_SCALE * radius * 1.1) / grid.dy_mm).ceil() as usize + 1;
         let hc = ((MAX_SCALE * radius * 1.1) / grid.dx_mm).ceil() as usize + 1;
         let conv = Convolver::new(grid.rows, grid.cols, hr, hc);
         let samples = densify(path, 0.5 * grid.dx_mm.min(grid.dy_mm));
         if samples.is_empty() {
-            return Err(CalibrateError::InvalidInput("the path log has no motion".into()));
+            return Err(CalibrateError::InvalidInput(
+                "the path log has no motion".into(),
+            ));
         }
         let before_valid = before.valid().clone();
-        let idx: Vec<usize> = before_valid.iter().enumerate().filter_map(|(k, &v)| v.then_some(k)).collect();
+        let idx: Vec<usize> = before_valid
+            .iter()
+            .enumerate()
+            .filter_map(|(k, &v)| v.then_some(k))
+            .collect();
         if idx.len() < 64 {
-            return Err(CalibrateError::Processing(format!("only {} valid pixels in the before map", idx.len())));
+            return Err(CalibrateError::Processing(format!(
+                "only {} valid pixels in the before map",
+                idx.len()
+            )));
         }
         let (cx, cy) = grid.centre_mm();
         let half = 0.5 * (grid.cols as f64 * grid.dx_mm).max(grid.rows as f64 * grid.dy_mm);
-        let xn = idx.iter().map(|&k| (grid.x_mm(k % grid.cols) - cx) / half).collect();
-        let yn = idx.iter().map(|&k| (grid.y_mm(k / grid.cols) - cy) / half).collect();
+        let xn = idx
+            .iter()
+            .map(|&k| (grid.x_mm(k % grid.cols) - cx) / half)
+            .collect();
+        let yn = idx
+            .iter()
+            .map(|&k| (grid.y_mm(k / grid.cols) - cy) / half)
+            .collect();
         let covariates = covariates(&grid, before, &samples);
         Ok(Problem {
             grid,
@@ -213,7 +246,11 @@ impl Problem {
         // widens the effective spot; pre-compensate to second order: K - (d^2 / 12) d2K/dx2 - ...
         let (r, c) = k0.dim();
         let at = |i: isize, j: isize| -> f64 {
-            if i < 0 || j < 0 || i as usize >= r || j as usize >= c { 0.0 } else { k0[(i as usize, j as usize)] }
+            if i < 0 || j < 0 || i as usize >= r || j as usize >= c {
+                0.0
+            } else {
+                k0[(i as usize, j as usize)]
+            }
         };
         let k = Array2::from_shape_fn((r, c), |(i, j)| {
             let (i, j) = (i as isize, j as isize);
@@ -248,7 +285,13 @@ impl Problem {
     /// Dwell spectrum of `dt_k * g_k` at positions (xs, ys).
     pub fn dwell_spectrum(&self, xs: &[f64], ys: &[f64], g: Option<&[f64]>) -> Spectrum {
         let w: Vec<f64> = match g {
-            Some(g) => self.samples.dt_s.iter().zip(g).map(|(d, v)| d * v).collect(),
+            Some(g) => self
+                .samples
+                .dt_s
+                .iter()
+                .zip(g)
+                .map(|(d, v)| d * v)
+                .collect(),
             None => self.samples.dt_s.clone(),
         };
         let d = splat(&self.grid, self.conv.hr, self.conv.hc, xs, ys, &w);
@@ -260,7 +303,11 @@ impl Problem {
         let s = a.as_slice();
         match s {
             Some(s) => self.idx.iter().map(|&k| s[k]).collect(),
-            None => self.idx.iter().map(|&k| a[(k / self.grid.cols, k % self.grid.cols)]).collect(),
+            None => self
+                .idx
+                .iter()
+                .map(|&k| a[(k / self.grid.cols, k % self.grid.cols)])
+                .collect(),
         }
     }
 
@@ -301,7 +348,13 @@ impl Problem {
                 if i0 < 0 || j0 < 0 || i0 + 1 >= r || j0 + 1 >= cc {
                     continue;
                 }
-                let ok = |a: isize, b: isize| a >= 0 && b >= 0 && a < r && b < cc && self.after_valid[(a as usize, b as usize)];
+                let ok = |a: isize, b: isize| {
+                    a >= 0
+                        && b >= 0
+                        && a < r
+                        && b < cc
+                        && self.after_valid[(a as usize, b as usize)]
+                };
                 if !(ok(i0, j0) && ok(i0 + 1, j0) && ok(i0, j0 + 1) && ok(i0 + 1, j0 + 1)) {
                     continue;
                 }
@@ -320,7 +373,12 @@ impl Problem {
                     let mut acc = 0.0;
                     for (a, wa) in wi.iter().enumerate() {
                         for (b, wb) in wj.iter().enumerate() {
-                            acc += wa * wb * self.after[((i0 - 1 + a as isize) as usize, (j0 - 1 + b as isize) as usize)];
+                            acc += wa
+                                * wb
+                                * self.after[(
+                                    (i0 - 1 + a as isize) as usize,
+                                    (j0 - 1 + b as isize) as usize,
+                                )];
                         }
                     }
                     acc
@@ -356,7 +414,11 @@ fn covariates(g: &MapGrid, before: &Surface, s: &Samples) -> Covariates {
             acc[5] += 1.0;
         }
     }
-    let (pz, px, py) = (acc[0] / acc[5].max(1.0), acc[1] / acc[3].max(1e-12), acc[2] / acc[4].max(1e-12));
+    let (pz, px, py) = (
+        acc[0] / acc[5].max(1.0),
+        acc[1] / acc[3].max(1e-12),
+        acc[2] / acc[4].max(1e-12),
+    );
     let flat = Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
         before.heights_nm()[(i, j)] - pz - px * (g.x_mm(j) - cx) - py * (g.y_mm(i) - cy)
     });
@@ -382,13 +444,24 @@ fn covariates(g: &MapGrid, before: &Surface, s: &Samples) -> Covariates {
         height.push(sample(g, &sm, x, y));
         sl.push(sample(g, &slope, x, y));
         // Off the map: continue the border value outwards (the part ends at the map edge).
-        let beyond = (xmin - x).max(0.0).max(x - xmax).hypot((ymin - y).max(0.0).max(y - ymax));
+        let beyond = (xmin - x)
+            .max(0.0)
+            .max(x - xmax)
+            .hypot((ymin - y).max(0.0).max(y - ymax));
         ed.push(sample(g, &edge, x, y) - beyond);
     }
     let time: Vec<f64> = s.t_s.iter().map(|t| t - s.t0_s).collect();
     Covariates {
         names: vec!["time", "x", "y", "feed", "height", "slope", "edge_distance"],
-        values: vec![time, s.x_mm.clone(), s.y_mm.clone(), s.feed_mm_per_s.clone(), height, sl, ed],
+        values: vec![
+            time,
+            s.x_mm.clone(),
+            s.y_mm.clone(),
+            s.feed_mm_per_s.clone(),
+            height,
+            sl,
+            ed,
+        ],
     }
 }
 
@@ -441,11 +514,22 @@ pub fn evaluate(p: &Problem, effects: &[Box<dyn Effect>], reuse: Option<&Eval>) 
         }
     }
     let (after_res, after_res_valid) = p.resample_after(reg);
-    let before_s = p.before.as_slice().map(|s| s.to_vec()).unwrap_or_else(|| p.before.iter().cloned().collect());
-    let ar = after_res.as_slice().map(|s| s.to_vec()).unwrap_or_else(|| after_res.iter().cloned().collect());
+    let before_s = p
+        .before
+        .as_slice()
+        .map(|s| s.to_vec())
+        .unwrap_or_else(|| p.before.iter().cloned().collect());
+    let ar = after_res
+        .as_slice()
+        .map(|s| s.to_vec())
+        .unwrap_or_else(|| after_res.iter().cloned().collect());
     let av: Vec<bool> = after_res_valid.iter().cloned().collect();
     let m: Vec<f64> = p.idx.iter().map(|&k| before_s[k] - ar[k]).collect();
-    let w: Vec<f64> = p.idx.iter().map(|&k| if av[k] { 1.0 } else { 0.0 }).collect();
+    let w: Vec<f64> = p
+        .idx
+        .iter()
+        .map(|&k| if av[k] { 1.0 } else { 0.0 })
+        .collect();
 
     if let Some(prev) = reuse {
         if prev.path_key == key {
@@ -486,12 +570,31 @@ pub fn evaluate(p: &Problem, effects: &[Box<dyn Effect>], reuse: Option<&Eval>) 
         cols.push(c);
         means.push(mean);
     }
-    for (n, v) in [("nuisance:piston", vec![1.0; p.idx.len()]), ("nuisance:tilt_x", p.xn.clone()), ("nuisance:tilt_y", p.yn.clone())] {
+    for (n, v) in [
+        ("nuisance:piston", vec![1.0; p.idx.len()]),
+        ("nuisance:tilt_x", p.xn.clone()),
+        ("nuisance:tilt_y", p.yn.clone()),
+    ] {
         names.push(n.into());
         cols.push(v);
         means.push(0.0);
     }
-    Eval { names, cols, means, m, w, xs, ys, scale, reg, after_res, after_res_valid, dwell, kernels, path_key: key }
+    Eval {
+        names,
+        cols,
+        means,
+        m,
+        w,
+        xs,
+        ys,
+        scale,
+        reg,
+        after_res,
+        after_res_valid,
+        dwell,
+        kernels,
+        path_key: key,
+    }
 }
 
 /// Columns `K * D_{g - mean(g)}` for rate terms (computed in parallel).
@@ -530,9 +633,15 @@ impl Fit {
 
 /// Joint least-squares fit of all columns (plus `extra`) to m over the weighted pixels.
 pub fn fit(ev: &Eval, extra: &[Vec<f64>]) -> Result<Fit, CalibrateError> {
-    let cols: Vec<&[f64]> = ev.cols.iter().chain(extra.iter()).map(|c| c.as_slice()).collect();
+    let cols: Vec<&[f64]> = ev
+        .cols
+        .iter()
+        .chain(extra.iter())
+        .map(|c| c.as_slice())
+        .collect();
     let (g, r) = lsq::gram(&cols, &ev.m, &ev.w, None);
-    let coef = lsq::solve(&g, &r).ok_or_else(|| CalibrateError::Processing("singular least-squares fit".into()))?;
+    let coef = lsq::solve(&g, &r)
+        .ok_or_else(|| CalibrateError::Processing("singular least-squares fit".into()))?;
     let mut resid = ev.m.clone();
     let mut rss = 0.0;
     let mut n = 0.0;
@@ -549,11 +658,20 @@ pub fn fit(ev: &Eval, extra: &[Vec<f64>]) -> Result<Fit, CalibrateError> {
             resid[i] = 0.0;
         }
     }
-    Ok(Fit { coef, resid, rss, n })
+    Ok(Fit {
+        coef,
+        resid,
+        rss,
+        n,
+    })
 }
 
 impl Eval {
     pub fn linear(&self, f: &Fit) -> Linear {
-        Linear { names: self.names.clone(), coef: f.coef[..self.names.len()].to_vec(), means: self.means.clone() }
+        Linear {
+            names: self.names.clone(),
+            coef: f.coef[..self.names.len()].to_vec(),
+            means: self.means.clone(),
+        }
     }
 }

@@ -15,8 +15,14 @@ pub fn pixel_noise_rms(h: &Array2<f64>, valid: &Array2<bool>) -> Option<f64> {
     let mut v = Vec::new();
     for i in 1..r.saturating_sub(1) {
         for j in 1..c.saturating_sub(1) {
-            if valid[(i, j)] && valid[(i - 1, j)] && valid[(i + 1, j)] && valid[(i, j - 1)] && valid[(i, j + 1)] {
-                let l = h[(i, j)] - 0.25 * (h[(i - 1, j)] + h[(i + 1, j)] + h[(i, j - 1)] + h[(i, j + 1)]);
+            if valid[(i, j)]
+                && valid[(i - 1, j)]
+                && valid[(i + 1, j)]
+                && valid[(i, j - 1)]
+                && valid[(i, j + 1)]
+            {
+                let l = h[(i, j)]
+                    - 0.25 * (h[(i - 1, j)] + h[(i + 1, j)] + h[(i, j - 1)] + h[(i, j + 1)]);
                 v.push(l.abs());
             }
         }
@@ -30,7 +36,12 @@ pub fn pixel_noise_rms(h: &Array2<f64>, valid: &Array2<bool>) -> Option<f64> {
 }
 
 /// Noise floor of before - after (nm RMS).
-pub fn removal_noise_floor(before: &Array2<f64>, bv: &Array2<bool>, after: &Array2<f64>, av: &Array2<bool>) -> f64 {
+pub fn removal_noise_floor(
+    before: &Array2<f64>,
+    bv: &Array2<bool>,
+    after: &Array2<f64>,
+    av: &Array2<bool>,
+) -> f64 {
     let a = pixel_noise_rms(before, bv).unwrap_or(0.0);
     let b = pixel_noise_rms(after, av).unwrap_or(0.0);
     a.hypot(b)

@@ -28,7 +28,9 @@ impl PathLog {
             )));
         }
         if t_s.len() < 2 {
-            return Err(CalibrateError::InvalidInput("the path log needs at least 2 samples".into()));
+            return Err(CalibrateError::InvalidInput(
+                "the path log needs at least 2 samples".into(),
+            ));
         }
         for (k, ((t, x), y)) in t_s.iter().zip(&x_mm).zip(&y_mm).enumerate() {
             if !(t.is_finite() && x.is_finite() && y.is_finite()) {
@@ -125,7 +127,11 @@ pub fn densify(path: &PathLog, max_step_mm: f64) -> Samples {
         // A segment implying an absurd number of sub-steps is bad data; cap keeps memory bounded.
         let n = ((len / step).ceil() as usize).clamp(1, 100_000);
         let dt = (t1 - t0) / n as f64;
-        let (ux, uy) = if len > 0.0 { (ddx / len, ddy / len) } else { (0.0, 0.0) };
+        let (ux, uy) = if len > 0.0 {
+            (ddx / len, ddy / len)
+        } else {
+            (0.0, 0.0)
+        };
         let feed = len / (t1 - t0);
         for m in 0..n {
             let f = (m as f64 + 0.5) / n as f64;
@@ -149,7 +155,12 @@ mod tests {
 
     #[test]
     fn densify_conserves_time_and_length() {
-        let p = PathLog::new(vec![0.0, 2.0, 3.0], vec![0.0, 1.0, 1.0], vec![0.0, 0.0, 0.5]).unwrap();
+        let p = PathLog::new(
+            vec![0.0, 2.0, 3.0],
+            vec![0.0, 1.0, 1.0],
+            vec![0.0, 0.0, 0.5],
+        )
+        .unwrap();
         let s = densify(&p, 0.1);
         let total: f64 = s.dt_s.iter().sum();
         assert!((total - 3.0).abs() < 1e-12);

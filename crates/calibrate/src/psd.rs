@@ -18,7 +18,9 @@ pub fn psd_1d(h: &Array2<f64>, valid: &Array2<bool>, d_mm: f64, along_x: bool) -
     let (nl, n) = if along_x { (r, c) } else { (c, r) };
     let mut planner = RealFftPlanner::<f64>::new();
     let fft = planner.plan_fft_forward(n);
-    let w: Vec<f64> = (0..n).map(|k| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * k as f64 / n as f64).cos()).collect();
+    let w: Vec<f64> = (0..n)
+        .map(|k| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * k as f64 / n as f64).cos())
+        .collect();
     let u: f64 = w.iter().map(|v| v * v).sum::<f64>() / n as f64;
     let mut acc = vec![0.0; n / 2 + 1];
     let mut wsum = 0.0;
@@ -38,7 +40,11 @@ pub fn psd_1d(h: &Array2<f64>, valid: &Array2<bool>, d_mm: f64, along_x: bool) -
         }
         let mean = s / cnt as f64;
         for k in 0..n {
-            buf[k] = if valid[at(k)] { (h[at(k)] - mean) * w[k] } else { 0.0 };
+            buf[k] = if valid[at(k)] {
+                (h[at(k)] - mean) * w[k]
+            } else {
+                0.0
+            };
         }
         if fft.process(&mut buf, &mut out).is_err() {
             continue;
@@ -52,10 +58,21 @@ pub fn psd_1d(h: &Array2<f64>, valid: &Array2<bool>, d_mm: f64, along_x: bool) -
     let psd: Vec<f64> = acc
         .iter()
         .enumerate()
-        .map(|(k, v)| v * norm * if k == 0 || (n % 2 == 0 && k == n / 2) { 1.0 } else { 2.0 })
+        .map(|(k, v)| {
+            v * norm
+                * if k == 0 || (n % 2 == 0 && k == n / 2) {
+                    1.0
+                } else {
+                    2.0
+                }
+        })
         .collect();
     let df = 1.0 / (n as f64 * d_mm);
-    Psd1 { freq_per_mm: (0..psd.len()).map(|k| k as f64 * df).collect(), psd_nm2_mm: psd, df_per_mm: df }
+    Psd1 {
+        freq_per_mm: (0..psd.len()).map(|k| k as f64 * df).collect(),
+        psd_nm2_mm: psd,
+        df_per_mm: df,
+    }
 }
 
 #[cfg(test)]
@@ -65,7 +82,9 @@ mod tests {
     #[test]
     fn band_rms_of_a_sine_is_amplitude_over_root_two() {
         // metrology.md self-check: A = 10 nm, p = 3 mm, N = 600, dx = 0.1 mm
-        let h = Array2::from_shape_fn((4, 600), |(_, j)| 10.0 * (2.0 * std::f64::consts::PI * j as f64 * 0.1 / 3.0).sin());
+        let h = Array2::from_shape_fn((4, 600), |(_, j)| {
+            10.0 * (2.0 * std::f64::consts::PI * j as f64 * 0.1 / 3.0).sin()
+        });
         let v = Array2::from_elem((4, 600), true);
         let p = psd_1d(&h, &v, 0.1, true);
         let band: f64 = p

@@ -59,13 +59,22 @@ pub fn jacobian(
             }
             r
         };
-        cols.push(r.iter().zip(&f0.resid).map(|(a, b)| (a - b) / steps[i]).collect());
+        cols.push(
+            r.iter()
+                .zip(&f0.resid)
+                .map(|(a, b)| (a - b) / steps[i])
+                .collect(),
+        );
     }
     Ok(cols)
 }
 
 /// Refines the non-linear parameters in place; returns the final evaluation and fit.
-pub fn refine(p: &Problem, effects: &mut [Box<dyn Effect>], iters: usize) -> Result<(Eval, Fit), CalibrateError> {
+pub fn refine(
+    p: &Problem,
+    effects: &mut [Box<dyn Effect>],
+    iters: usize,
+) -> Result<(Eval, Fit), CalibrateError> {
     let mut ev = evaluate(p, effects, None);
     let mut f = fit(&ev, &[])?;
     let (mut theta, _) = nl_vec(effects);
@@ -92,7 +101,9 @@ pub fn refine(p: &Problem, effects: &mut [Box<dyn Effect>], iters: usize) -> Res
             for (a, row) in m.iter_mut().enumerate() {
                 row[a] += lambda * jtj[a][a].max(1e-300);
             }
-            let Some(delta) = crate::lsq::solve(&m, &jtr) else { break };
+            let Some(delta) = crate::lsq::solve(&m, &jtr) else {
+                break;
+            };
             let t: Vec<f64> = theta.iter().zip(&delta).map(|(a, d)| a - d).collect();
             let mut trial: Vec<Box<dyn Effect>> = effects.to_vec();
             set_nl(&mut trial, &t);

@@ -25,7 +25,10 @@ pub struct Options {
 
 impl Default for Options {
     fn default() -> Self {
-        Options { max_effects: 6, refine_iters: 6 }
+        Options {
+            max_effects: 6,
+            refine_iters: 6,
+        }
     }
 }
 
@@ -137,11 +140,24 @@ fn flat_params(effects: &[Box<dyn Effect>], lin: &Linear) -> Vec<f64> {
 /// forward-difference columns of the non-linear parameters at fixed linear coefficients),
 /// covariance `s^2 (J^T J)^-1` with `s^2 = RSS / (n - p)`, propagated by finite differences.
 /// Assumes independent residuals; spatially correlated residual structure makes them optimistic.
-fn uncertainties(p: &Problem, effects: &[Box<dyn Effect>], ev: &Eval, f: &Fit) -> Result<Vec<f64>, CalibrateError> {
-    let lin_cols: Vec<Vec<f64>> = ev.cols.iter().map(|c| c.iter().zip(&ev.w).map(|(a, w)| a * w).collect()).collect();
+fn uncertainties(
+    p: &Problem,
+    effects: &[Box<dyn Effect>],
+    ev: &Eval,
+    f: &Fit,
+) -> Result<Vec<f64>, CalibrateError> {
+    let lin_cols: Vec<Vec<f64>> = ev
+        .cols
+        .iter()
+        .map(|c| c.iter().zip(&ev.w).map(|(a, w)| a * w).collect())
+        .collect();
     let nl_cols = jacobian(p, effects, ev, f, false)?;
     let nlin = lin_cols.len();
-    let all: Vec<&[f64]> = lin_cols.iter().map(|c| c.as_slice()).chain(nl_cols.iter().map(|c| c.as_slice())).collect();
+    let all: Vec<&[f64]> = lin_cols
+        .iter()
+        .map(|c| c.as_slice())
+        .chain(nl_cols.iter().map(|c| c.as_slice()))
+        .collect();
     let n = all.len();
     let mut jtj = vec![vec![0.0; n]; n];
     for a in 0..n {
@@ -151,7 +167,8 @@ fn uncertainties(p: &Problem, effects: &[Box<dyn Effect>], ev: &Eval, f: &Fit) -
             jtj[b][a] = s;
         }
     }
-    let cov = crate::lsq::inverse(&jtj).ok_or_else(|| CalibrateError::Processing("singular covariance".into()))?;
+    let cov = crate::lsq::inverse(&jtj)
+        .ok_or_else(|| CalibrateError::Processing("singular covariance".into()))?;
     let s2 = f.rss / (f.n - n as f64).max(1.0);
     let lin0 = ev.linear(f);
     let base = flat_params(effects, &lin0);
@@ -195,11 +212,23 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     let mut effects: Vec<Box<dyn Effect>> = Vec::new();
     let (mut ev, mut f) = refine(p, &mut effects, 0)?;
     if f.n < 64.0 {
-        return Err(CalibrateError::Processing("fewer than 64 pixels valid in both maps".into()));
+        return Err(CalibrateError::Processing(
+            "fewer than 64 pixels valid in both maps".into(),
+        ));
     }
     // Measured removal after removing the set-up terms alone.
-    let nuis: Vec<usize> = ev.names.iter().enumerate().filter(|(_, n)| n.starts_with("nuisance")).map(|(i, _)| i).collect();
-    let only_nuis = Eval { cols: nuis.iter().map(|&i| ev.cols[i].clone()).collect(), names: nuis.iter().map(|&i| ev.names[i].clone()).collect(), ..clone_eval_shell(&ev) };
+    let nuis: Vec<usize> = ev
+        .names
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| n.starts_with("nuisance"))
+        .map(|(i, _)| i)
+        .collect();
+    let only_nuis = Eval {
+        cols: nuis.iter().map(|&i| ev.cols[i].clone()).collect(),
+        names: nuis.iter().map(|&i| ev.names[i].clone()).collect(),
+        ..clone_eval_shell(&ev)
+    };
     let fm = fit(&only_nuis, &[])?;
     let baseline = Baseline {
         residual_rms_nm: f.rms(),
@@ -219,27 +248,50 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     let mut accepted: Vec<(String, f64, f64, Score)> = Vec::new(); // key, rms before, rms after, score
     let mut blocked: Vec<String> = Vec::new();
     for _ in 0..opts.max_effects {
-        let cur = Current { p, ev: &ev, resid: &f.resid, accepted: &effects };
-        let cands: Vec<_> = candidates(&cur).into_iter().filter(|c| !blocked.contains(&c.key)).collect();
+        let cur = Current {
+            p,
+            ev: &ev,
+            resid: &f.resid,
+            accepted: &effects,
+        };
+        let cands: Vec<_> = candidates(&cur)
+            .into_iter()
+            .filter(|c| !blocked.contains(&c.key))
+            .collect();
         let bg = base_gram(&ev, &sp);
-        let scores: Vec<Score> = cands.par_iter().map(|c| holdout(&ev, &c.extra, &sp, &bg)).collect();
+        let scores: Vec<Score> = cands
+            .par_iter()
+            .map(|c| holdout(&ev, &c.extra, &sp, &bg))
+            .collect();
         let mut round = Round {
             accepted: None,
             candidates: cands
                 .iter()
                 .zip(&scores)
-                .map(|(c, s)| CandidateScore { key: c.key.clone(), z: s.z, heldout_reduction_fraction: s.fraction })
+                .map(|(c, s)| CandidateScore {
+                    key: c.key.clone(),
+                    z: s.z,
+                    heldout_reduction_fraction: s.fraction,
+                })
                 .collect(),
         };
         // Parsimony: among significant candidates within 10 % of the best held-out reduction,
         // the one with the fewest parameters (then the larger reduction) wins.
-        let top = scores.iter().filter(|s| s.significant()).map(|s| s.delta).fold(0.0, f64::max);
+        let top = scores
+            .iter()
+            .filter(|s| s.significant())
+            .map(|s| s.delta)
+            .fold(0.0, f64::max);
         let best = scores
             .iter()
             .enumerate()
             .filter(|(_, s)| s.significant() && s.delta >= 0.9 * top)
             .min_by(|a, b| {
-                cands[a.0].extra.len().cmp(&cands[b.0].extra.len()).then(b.1.delta.total_cmp(&a.1.delta))
+                cands[a.0]
+                    .extra
+                    .len()
+                    .cmp(&cands[b.0].extra.len())
+                    .then(b.1.delta.total_cmp(&a.1.delta))
             })
             .map(|(i, s)| (i, *s));
         let Some((bi, score)) = best else {
@@ -272,7 +324,11 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         f = f2;
     }
     let lin = ev.linear(&f);
-    let sig = if effects.is_empty() { Vec::new() } else { uncertainties(p, &effects, &ev, &f).unwrap_or_default() };
+    let sig = if effects.is_empty() {
+        Vec::new()
+    } else {
+        uncertainties(p, &effects, &ev, &f).unwrap_or_default()
+    };
     let mut k = 0;
     let mut reports = Vec::new();
     for (e, (_, rb, ra, score)) in effects.iter().zip(&accepted) {
@@ -287,7 +343,9 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                     k += 1;
                 }
                 Param::List(xs) => {
-                    let s: Vec<f64> = (0..xs.len()).map(|i| sig.get(k + i).copied().unwrap_or(f64::NAN)).collect();
+                    let s: Vec<f64> = (0..xs.len())
+                        .map(|i| sig.get(k + i).copied().unwrap_or(f64::NAN))
+                        .collect();
                     if s.iter().all(|v| v.is_finite()) {
                         unc.insert(name.clone(), serde_json::json!(s));
                     }
@@ -313,7 +371,10 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     maps.final_residual_nm = Some((rmap, rmask));
     Ok(Calibration {
         baseline,
-        final_: Final { residual_rms_nm: f.rms(), residual_pv_nm: pv(&f, &ev.w) },
+        final_: Final {
+            residual_rms_nm: f.rms(),
+            residual_pv_nm: pv(&f, &ev.w),
+        },
         noise_floor_rms_nm: noise,
         effects: reports,
         unexplained,

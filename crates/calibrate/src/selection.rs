@@ -7,7 +7,9 @@
 //! current model vs the model with the candidate, each fitted on the other half). The held-out
 //! reduction is `Delta = sum_b d_b`; its standard error is `sqrt(n_b) * sd(d_b)` (blocks as the
 //! independent units, so spatially correlated residuals do not overstate significance).
-//! A candidate is significant when `z = Delta / SE >= Z_MIN` and `Delta` is at least `MIN_FRACTION`
+//! The block sign test (share of blocks where the candidate helps; z = (n_+ - n/2) / sqrt(n/4))
+//! is the robust alternative when a few blocks dominate the variance; `z` is the larger of the
+//! two. A candidate is significant when `z >= Z_MIN` and `Delta` is at least `MIN_FRACTION`
 //! of the held-out SSE of the current model. Under pure noise a fitted extra column can only
 //! lose on held-out data on average, so noise yields no accepted effect.
 
@@ -38,7 +40,11 @@ pub fn split(p: &Problem) -> Split {
         half_a.push((bi + bj) % 2 == 0);
         block.push(bi * nbc + bj);
     }
-    Split { half_a, block, n_blocks: nbr * nbc }
+    Split {
+        half_a,
+        block,
+        n_blocks: nbr * nbc,
+    }
 }
 
 /// Gram matrices of the current columns on each half (reused for every candidate of a round).
@@ -54,7 +60,11 @@ pub fn base_gram(ev: &Eval, sp: &Split) -> BaseGram {
     let sb: Vec<bool> = sp.half_a.iter().map(|v| !v).collect();
     let (ga, ra) = lsq::gram(&cols, &ev.m, &ev.w, Some(&sa));
     let (gb, rb) = lsq::gram(&cols, &ev.m, &ev.w, Some(&sb));
-    BaseGram { g: [ga, gb], r: [ra, rb], sel: [sa, sb] }
+    BaseGram {
+        g: [ga, gb],
+        r: [ra, rb],
+        sel: [sa, sb],
+    }
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -145,5 +155,13 @@ pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Scor
     let mean = delta / nbk;
     let var = used.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (nbk - 1.0);
     let se = (var * nbk).sqrt().max(1e-300);
-    Score { delta, z: delta / se, fraction: delta / sse_base.max(1e-300) }
+    let z_mean = delta / se;
+    // Sign test over blocks: robust when a few blocks (edges, defects) dominate the variance.
+    let n_pos = used.iter().filter(|v| **v > 0.0).count() as f64;
+    let z_sign = (n_pos - 0.5 * nbk) / (0.25 * nbk).sqrt();
+    Score {
+        delta,
+        z: z_mean.max(z_sign),
+        fraction: delta / sse_base.max(1e-300),
+    }
 }

@@ -22,12 +22,20 @@ pub struct TifMap {
 impl TifMap {
     pub fn new(rate_nm_per_s: Array2<f64>, dx_mm: f64, dy_mm: f64) -> Result<Self, CalibrateError> {
         if !(dx_mm > 0.0 && dy_mm > 0.0 && dx_mm.is_finite() && dy_mm.is_finite()) {
-            return Err(CalibrateError::InvalidInput("TIF pixel size must be positive".into()));
+            return Err(CalibrateError::InvalidInput(
+                "TIF pixel size must be positive".into(),
+            ));
         }
         if rate_nm_per_s.is_empty() || rate_nm_per_s.iter().any(|v| !v.is_finite()) {
-            return Err(CalibrateError::InvalidInput("TIF map is empty or not finite".into()));
+            return Err(CalibrateError::InvalidInput(
+                "TIF map is empty or not finite".into(),
+            ));
         }
-        Ok(TifMap { rate_nm_per_s, dx_mm, dy_mm })
+        Ok(TifMap {
+            rate_nm_per_s,
+            dx_mm,
+            dy_mm,
+        })
     }
 
     /// Removal rate from a measured spot: a height map (a dip) polished for `dwell_s` at its
@@ -153,7 +161,11 @@ impl TifMap {
                 0.0
             }
         });
-        TifMap { rate_nm_per_s: rate, dx_mm: self.dx_mm, dy_mm: self.dy_mm }
+        TifMap {
+            rate_nm_per_s: rate,
+            dx_mm: self.dx_mm,
+            dy_mm: self.dy_mm,
+        }
     }
 
     /// Kernel `(2 hr + 1) x (2 hc + 1)` on pitch (dx, dy), of the spot widened by `scale`:

@@ -28,7 +28,11 @@ pub struct Unexplained {
 
 fn region(g: &MapGrid, r: &Array2<f64>, valid: &Array2<bool>, f_hi: f64) -> ([f64; 4], f64) {
     let sigma_px = (0.25 / f_hi.max(1e-9) / g.dx_mm.min(g.dy_mm)).clamp(0.0, 20.0);
-    let s = if sigma_px >= 0.7 { smooth_masked(r, valid, sigma_px) } else { r.clone() };
+    let s = if sigma_px >= 0.7 {
+        smooth_masked(r, valid, sigma_px)
+    } else {
+        r.clone()
+    };
     let b = (g.rows.min(g.cols) / 10).max(4);
     let (nbr, nbc) = (g.rows.div_ceil(b), g.cols.div_ceil(b));
     let mut acc = vec![(0.0, 0usize); nbr * nbc];
@@ -39,9 +43,17 @@ fn region(g: &MapGrid, r: &Array2<f64>, valid: &Array2<bool>, f_hi: f64) -> ([f6
             a.1 += 1;
         }
     }
-    let rms: Vec<f64> = acc.iter().map(|(s2, n)| if *n > 0 { (s2 / *n as f64).sqrt() } else { 0.0 }).collect();
+    let rms: Vec<f64> = acc
+        .iter()
+        .map(|(s2, n)| if *n > 0 { (s2 / *n as f64).sqrt() } else { 0.0 })
+        .collect();
     let max = rms.iter().cloned().fold(0.0, f64::max);
-    let mut bbox = [f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY];
+    let mut bbox = [
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    ];
     let mut hit = 0usize;
     for (k, &v) in rms.iter().enumerate() {
         if max > 0.0 && v >= 0.5 * max {
@@ -56,11 +68,20 @@ fn region(g: &MapGrid, r: &Array2<f64>, valid: &Array2<bool>, f_hi: f64) -> ([f6
     if hit == 0 {
         bbox = [g.x_mm(0), g.x_mm(g.cols - 1), g.y_mm(0), g.y_mm(g.rows - 1)];
     }
-    (bbox, hit as f64 / rms.iter().filter(|v| **v > 0.0).count().max(1) as f64)
+    (
+        bbox,
+        hit as f64 / rms.iter().filter(|v| **v > 0.0).count().max(1) as f64,
+    )
 }
 
 /// Bands of unexplained structure in a residual map, given the noise floor (nm RMS).
-pub fn find(g: &MapGrid, r: &Array2<f64>, valid: &Array2<bool>, noise_rms_nm: f64, total_rms_nm: f64) -> Vec<Unexplained> {
+pub fn find(
+    g: &MapGrid,
+    r: &Array2<f64>,
+    valid: &Array2<bool>,
+    noise_rms_nm: f64,
+    total_rms_nm: f64,
+) -> Vec<Unexplained> {
     let mut out = Vec::new();
     for along_x in [true, false] {
         let d = if along_x { g.dx_mm } else { g.dy_mm };
@@ -88,13 +109,21 @@ pub fn find(g: &MapGrid, r: &Array2<f64>, valid: &Array2<bool>, noise_rms_nm: f6
                     }
                     k += 1;
                 }
-                let ex: f64 = (start..=end).map(|b| (p.psd_nm2_mm[b] - white).max(0.0) * p.df_per_mm).sum();
+                let ex: f64 = (start..=end)
+                    .map(|b| (p.psd_nm2_mm[b] - white).max(0.0) * p.df_per_mm)
+                    .sum();
                 let rms = ex.sqrt();
                 if rms > 0.3 * noise_rms_nm.max(1e-12) {
                     let (f1, f2) = (p.freq_per_mm[start], p.freq_per_mm[end]);
                     let (bbox, share) = region(g, r, valid, f2.max(p.df_per_mm));
                     let dir = if along_x { "x" } else { "y" };
-                    let per = |f: f64| if f > 0.0 { format!("{:.2}", 1.0 / f) } else { "inf".into() };
+                    let per = |f: f64| {
+                        if f > 0.0 {
+                            format!("{:.2}", 1.0 / f)
+                        } else {
+                            "inf".into()
+                        }
+                    };
                     out.push(Unexplained {
                         description: format!(
                             "structure varying along {dir} at {f1:.4}-{f2:.4} /mm (periods {}-{} mm), {} nm RMS above the noise, \
@@ -121,7 +150,9 @@ pub fn find(g: &MapGrid, r: &Array2<f64>, valid: &Array2<bool>, noise_rms_nm: f6
     }
     out.sort_by(|a, b| b.rms_nm.total_cmp(&a.rms_nm));
     out.truncate(4);
-    let excess_total = (total_rms_nm.powi(2) - noise_rms_nm.powi(2)).max(0.0).sqrt();
+    let excess_total = (total_rms_nm.powi(2) - noise_rms_nm.powi(2))
+        .max(0.0)
+        .sqrt();
     if out.is_empty() && excess_total > 0.5 * noise_rms_nm {
         let (bbox, share) = region(g, r, valid, 0.5 / g.dx_mm.max(g.dy_mm));
         out.push(Unexplained {

@@ -82,10 +82,15 @@ impl Current<'_> {
 
     /// Column `sum_m K_m * D_{g_m}` at the executed positions, on the analysis pixels.
     pub fn column(&self, terms: &[(&[f64], &crate::fftconv::Spectrum)]) -> Vec<f64> {
-        let spectra: Vec<crate::fftconv::Spectrum> =
-            terms.iter().map(|(g, _)| self.p.dwell_spectrum(&self.ev.xs, &self.ev.ys, Some(g))).collect();
-        let pairs: Vec<(&crate::fftconv::Spectrum, &crate::fftconv::Spectrum)> =
-            spectra.iter().zip(terms).map(|(d, (_, k))| (d, *k)).collect();
+        let spectra: Vec<crate::fftconv::Spectrum> = terms
+            .iter()
+            .map(|(g, _)| self.p.dwell_spectrum(&self.ev.xs, &self.ev.ys, Some(g)))
+            .collect();
+        let pairs: Vec<(&crate::fftconv::Spectrum, &crate::fftconv::Spectrum)> = spectra
+            .iter()
+            .zip(terms)
+            .map(|(d, (_, k))| (d, *k))
+            .collect();
         self.p.compress(&self.p.conv.apply_sum(&pairs))
     }
 
@@ -102,7 +107,9 @@ pub fn spectral_peaks(q: &[f64], h: &[f64], p_min: f64, p_max: f64, n: usize) ->
     if q.is_empty() || !(p_min > 0.0) || p_max <= p_min {
         return Vec::new();
     }
-    let (lo, hi) = q.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, &v| (a.0.min(v), a.1.max(v)));
+    let (lo, hi) = q.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, &v| {
+        (a.0.min(v), a.1.max(v))
+    });
     let bin = p_min / 4.0;
     let nb = (((hi - lo) / bin).ceil() as usize + 1).min(1 << 20);
     if nb < 8 {
@@ -129,9 +136,17 @@ pub fn spectral_peaks(q: &[f64], h: &[f64], p_min: f64, p_max: f64, n: usize) ->
     let mut peaks = Vec::new();
     for k in kmin.max(1)..=kmax {
         if pw[k] > pw[k - 1] && pw[k] >= pw[k + 1] {
-            let (a, b, c) = (pw[k - 1].max(1e-300).ln(), pw[k].max(1e-300).ln(), pw[k + 1].max(1e-300).ln());
+            let (a, b, c) = (
+                pw[k - 1].max(1e-300).ln(),
+                pw[k].max(1e-300).ln(),
+                pw[k + 1].max(1e-300).ln(),
+            );
             let den = a - 2.0 * b + c;
-            let d = if den.abs() > 1e-300 { (0.5 * (a - c) / den).clamp(-0.5, 0.5) } else { 0.0 };
+            let d = if den.abs() > 1e-300 {
+                (0.5 * (a - c) / den).clamp(-0.5, 0.5)
+            } else {
+                0.0
+            };
             peaks.push(((k as f64 + d) * df, pw[k]));
         }
     }
@@ -172,7 +187,10 @@ mod tests {
     #[test]
     fn finds_the_period_of_a_sampled_sine() {
         let q: Vec<f64> = (0..5000).map(|k| k as f64 * 0.37).collect();
-        let h: Vec<f64> = q.iter().map(|x| (2.0 * std::f64::consts::PI * x / 23.0).sin()).collect();
+        let h: Vec<f64> = q
+            .iter()
+            .map(|x| (2.0 * std::f64::consts::PI * x / 23.0).sin())
+            .collect();
         let p = spectral_peaks(&q, &h, 2.0, 500.0, 2);
         assert!((p[0].0 - 23.0).abs() < 0.1, "{:?}", p);
     }

@@ -38,7 +38,10 @@ impl Effect for PathOffset {
         ys.iter_mut().for_each(|y| *y += self.d[1]);
     }
     fn params(&self, _lin: &Linear) -> Vec<(String, Param)> {
-        vec![("dx_mm".into(), Param::Num(self.d[0])), ("dy_mm".into(), Param::Num(self.d[1]))]
+        vec![
+            ("dx_mm".into(), Param::Num(self.d[0])),
+            ("dy_mm".into(), Param::Num(self.d[1])),
+        ]
     }
 }
 
@@ -48,12 +51,24 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     }
     let p = cur.p;
     let k = &cur.ev.kernels;
-    let cx: Vec<f64> = p.compress(&p.conv.apply(&cur.ev.dwell, &k.kx)).into_iter().map(|v| -v).collect();
-    let cy: Vec<f64> = p.compress(&p.conv.apply(&cur.ev.dwell, &k.ky)).into_iter().map(|v| -v).collect();
+    let cx: Vec<f64> = p
+        .compress(&p.conv.apply(&cur.ev.dwell, &k.kx))
+        .into_iter()
+        .map(|v| -v)
+        .collect();
+    let cy: Vec<f64> = p
+        .compress(&p.conv.apply(&cur.ev.dwell, &k.ky))
+        .into_iter()
+        .map(|v| -v)
+        .collect();
     vec![Candidate {
         key: "path_offset".into(),
         kind: "path_offset",
         extra: vec![cx, cy],
-        make: Box::new(|c, s0| Box::new(PathOffset { d: [c[0] / s0, c[1] / s0] })),
+        make: Box::new(|c, s0| {
+            Box::new(PathOffset {
+                d: [c[0] / s0, c[1] / s0],
+            })
+        }),
     }]
 }

@@ -54,7 +54,11 @@ impl Effect for PeriodicPathError {
         "periodic_path_error"
     }
     fn key(&self) -> String {
-        format!("periodic_path_error:{}:{}", if self.axis_x { "x" } else { "y" }, self.coord.name())
+        format!(
+            "periodic_path_error:{}:{}",
+            if self.axis_x { "x" } else { "y" },
+            self.coord.name()
+        )
     }
     fn boxed_clone(&self) -> Box<dyn Effect> {
         Box::new(self.clone())
@@ -82,12 +86,22 @@ impl Effect for PeriodicPathError {
         }
     }
     fn params(&self, _lin: &Linear) -> Vec<(String, Param)> {
-        let period_mm = if self.coord == Coord::Time { self.period * self.mean_feed } else { self.period };
+        let period_mm = if self.coord == Coord::Time {
+            self.period * self.mean_feed
+        } else {
+            self.period
+        };
         let mut v = vec![
-            ("axis".into(), Param::Text(if self.axis_x { "x" } else { "y" }.into())),
+            (
+                "axis".into(),
+                Param::Text(if self.axis_x { "x" } else { "y" }.into()),
+            ),
             ("amplitude_mm".into(), Param::Num(self.a.hypot(self.b))),
             ("period_mm".into(), Param::Num(period_mm)),
-            ("phase_deg".into(), Param::Num(self.b.atan2(self.a).to_degrees())),
+            (
+                "phase_deg".into(),
+                Param::Num(self.b.atan2(self.a).to_degrees()),
+            ),
             ("coordinate".into(), Param::Text(self.coord.name().into())),
         ];
         if self.coord == Coord::Time {
@@ -104,14 +118,30 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let duration = (s.t1_s - s.t0_s).max(1e-9);
     let arc_total = s.arc_mm.last().copied().unwrap_or(0.0);
     let mean_feed = arc_total / duration;
-    let max_feed = s.feed_mm_per_s.iter().cloned().fold(0.0, f64::max).max(1e-9);
-    let (wx, wy) = (p.grid.cols as f64 * p.grid.dx_mm, p.grid.rows as f64 * p.grid.dy_mm);
+    let max_feed = s
+        .feed_mm_per_s
+        .iter()
+        .cloned()
+        .fold(0.0, f64::max)
+        .max(1e-9);
+    let (wx, wy) = (
+        p.grid.cols as f64 * p.grid.dx_mm,
+        p.grid.rows as f64 * p.grid.dy_mm,
+    );
     let mut out = Vec::new();
     for axis_x in [true, false] {
-        let kern = if axis_x { &cur.ev.kernels.kx } else { &cur.ev.kernels.ky };
+        let kern = if axis_x {
+            &cur.ev.kernels.kx
+        } else {
+            &cur.ev.kernels.ky
+        };
         let h = cur.matched(kern);
         for coord in [Coord::X, Coord::Y, Coord::Arc, Coord::Time] {
-            let key = format!("periodic_path_error:{}:{}", if axis_x { "x" } else { "y" }, coord.name());
+            let key = format!(
+                "periodic_path_error:{}:{}",
+                if axis_x { "x" } else { "y" },
+                coord.name()
+            );
             if cur.has(&key) {
                 continue;
             }
@@ -133,7 +163,14 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
                     kind: "periodic_path_error",
                     extra: vec![cs, cc],
                     make: Box::new(move |c, s0| {
-                        Box::new(PeriodicPathError { axis_x, coord, period, a: c[0] / s0, b: c[1] / s0, mean_feed })
+                        Box::new(PeriodicPathError {
+                            axis_x,
+                            coord,
+                            period,
+                            a: c[0] / s0,
+                            b: c[1] / s0,
+                            mean_feed,
+                        })
                     }),
                 });
             }

@@ -39,12 +39,21 @@ impl Effect for RateCovariate {
         Box::new(self.clone())
     }
     fn rate_terms(&self, p: &Problem) -> Vec<(String, Vec<f64>)> {
-        vec![(self.col(), p.covariates.get(self.covariate).map(|v| v.to_vec()).unwrap_or_default())]
+        vec![(
+            self.col(),
+            p.covariates
+                .get(self.covariate)
+                .map(|v| v.to_vec())
+                .unwrap_or_default(),
+        )]
     }
     fn params(&self, lin: &Linear) -> Vec<(String, Param)> {
         vec![
             ("covariate".into(), Param::Text(self.covariate.into())),
-            ("coefficient".into(), Param::Num(lin.get(&self.col()) / lin.s0())),
+            (
+                "coefficient".into(),
+                Param::Num(lin.get(&self.col()) / lin.s0()),
+            ),
             ("coefficient_units".into(), Param::Text(self.units.into())),
         ]
     }
@@ -53,11 +62,16 @@ impl Effect for RateCovariate {
 pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let mut out = Vec::new();
     for (name, units) in COVARIATES {
-        let e = RateCovariate { covariate: name, units };
+        let e = RateCovariate {
+            covariate: name,
+            units,
+        };
         if cur.has(&e.key()) {
             continue;
         }
-        let Some(q) = cur.p.covariates.get(name) else { continue };
+        let Some(q) = cur.p.covariates.get(name) else {
+            continue;
+        };
         let mean = cur.p.samples.dwell_mean(q);
         let g: Vec<f64> = q.iter().map(|v| v - mean).collect();
         if g.iter().all(|v| v.abs() < 1e-12) {
@@ -68,7 +82,12 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
             key: e.key(),
             kind: "rate_covariate",
             extra: vec![col],
-            make: Box::new(move |_, _| Box::new(RateCovariate { covariate: name, units })),
+            make: Box::new(move |_, _| {
+                Box::new(RateCovariate {
+                    covariate: name,
+                    units,
+                })
+            }),
         });
     }
     out

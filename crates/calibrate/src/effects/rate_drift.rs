@@ -41,5 +41,10 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let mean = cur.p.samples.dwell_mean(&t);
     let g: Vec<f64> = t.iter().map(|v| v - mean).collect();
     let col = cur.column(&[(&g, &cur.ev.kernels.k)]);
-    vec![Candidate { key: "rate_drift".into(), kind: "rate_drift", extra: vec![col], make: Box::new(|_, _| Box::new(RateDrift)) }]
+    vec![Candidate {
+        key: "rate_drift".into(),
+        kind: "rate_drift",
+        extra: vec![col],
+        make: Box::new(|_, _| Box::new(RateDrift)),
+    }]
 }

@@ -16,8 +16,14 @@ fn terms(p: &Problem, period_s: f64) -> Vec<(String, Vec<f64>)> {
     let w = 2.0 * std::f64::consts::PI / period_s;
     let t = &p.samples;
     vec![
-        ("rate:osc_sin".into(), t.t_s.iter().map(|v| (w * (v - t.t0_s)).sin()).collect()),
-        ("rate:osc_cos".into(), t.t_s.iter().map(|v| (w * (v - t.t0_s)).cos()).collect()),
+        (
+            "rate:osc_sin".into(),
+            t.t_s.iter().map(|v| (w * (v - t.t0_s)).sin()).collect(),
+        ),
+        (
+            "rate:osc_cos".into(),
+            t.t_s.iter().map(|v| (w * (v - t.t0_s)).cos()).collect(),
+        ),
     ]
 }
 

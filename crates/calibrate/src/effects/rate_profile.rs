@@ -40,7 +40,10 @@ impl Effect for RateProfile {
     }
     fn params(&self, lin: &Linear) -> Vec<(String, Param)> {
         let s0 = lin.s0();
-        let mut v = vec![("knots_fraction".into(), Param::List((0..KNOTS).map(|m| m as f64 / (KNOTS - 1) as f64).collect()))];
+        let mut v = vec![(
+            "knots_fraction".into(),
+            Param::List((0..KNOTS).map(|m| m as f64 / (KNOTS - 1) as f64).collect()),
+        )];
         let mut rel = vec![0.0];
         rel.extend((1..KNOTS).map(|m| lin.get(&format!("rate:hat{m}")) / s0));
         v.push(("rate_change_fraction".into(), Param::List(rel)));
@@ -61,5 +64,10 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
             cur.column(&[(&gc, &cur.ev.kernels.k)])
         })
         .collect();
-    vec![Candidate { key: "rate_profile_time".into(), kind: "rate_profile_time", extra: cols, make: Box::new(|_, _| Box::new(RateProfile)) }]
+    vec![Candidate {
+        key: "rate_profile_time".into(),
+        kind: "rate_profile_time",
+        extra: cols,
+        make: Box::new(|_, _| Box::new(RateProfile)),
+    }]
 }

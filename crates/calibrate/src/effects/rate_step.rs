@@ -14,7 +14,9 @@ pub struct RateStep {
 const COL: &str = "rate:step";
 
 fn step(p: &Problem, at: f64) -> Vec<f64> {
-    (0..p.samples.len()).map(|k| if p.samples.tau(k) >= at { 1.0 } else { 0.0 }).collect()
+    (0..p.samples.len())
+        .map(|k| if p.samples.tau(k) >= at { 1.0 } else { 0.0 })
+        .collect()
 }
 
 impl Effect for RateStep {
@@ -80,5 +82,10 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let m = s.dwell_mean(&g);
     let gc: Vec<f64> = g.iter().map(|v| v - m).collect();
     let col = cur.column(&[(&gc, &cur.ev.kernels.k)]);
-    vec![Candidate { key: "rate_step".into(), kind: "rate_step", extra: vec![col], make: Box::new(move |_, _| Box::new(RateStep { at_tau: at })) }]
+    vec![Candidate {
+        key: "rate_step".into(),
+        kind: "rate_step",
+        extra: vec![col],
+        make: Box::new(move |_, _| Box::new(RateStep { at_tau: at })),
+    }]
 }

@@ -77,7 +77,10 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         kind: "registration",
         extra: vec![p.compress(&gx), p.compress(&gy), p.compress(&gr)],
         make: Box::new(move |c, _s0| {
-            Box::new(Registration { p: [base[0] + c[0], base[1] + c[1], base[2] + c[2]], pixel_mm: pix })
+            Box::new(Registration {
+                p: [base[0] + c[0], base[1] + c[1], base[2] + c[2]],
+                pixel_mm: pix,
+            })
         }),
     }]
 }

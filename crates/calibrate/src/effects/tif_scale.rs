@@ -43,12 +43,18 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     if cur.has("tif_scale") {
         return Vec::new();
     }
-    let col = cur.p.compress(&cur.p.conv.apply(&cur.ev.dwell, &cur.ev.kernels.ks));
+    let col = cur
+        .p
+        .compress(&cur.p.conv.apply(&cur.ev.dwell, &cur.ev.kernels.ks));
     let s = cur.ev.scale;
     vec![Candidate {
         key: "tif_scale".into(),
         kind: "tif_scale",
         extra: vec![col],
-        make: Box::new(move |c, s0| Box::new(TifScale { scale: (s + c[0] / s0).clamp(0.5, MAX_SCALE) })),
+        make: Box::new(move |c, s0| {
+            Box::new(TifScale {
+                scale: (s + c[0] / s0).clamp(0.5, MAX_SCALE),
+            })
+        }),
     }]
 }

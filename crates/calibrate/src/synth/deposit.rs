@@ -29,9 +29,13 @@ pub fn deposit(grid: &MapGrid, tif: &TrueTif, steps: &[Instant]) -> Array2<f64> 
             for s in part {
                 let reach = tif.radius_mm * s.scale;
                 let j0 = ((s.x_mm - reach - grid.x0_mm) / grid.dx_mm).ceil().max(0.0);
-                let j1 = ((s.x_mm + reach - grid.x0_mm) / grid.dx_mm).floor().min(cols as f64 - 1.0);
+                let j1 = ((s.x_mm + reach - grid.x0_mm) / grid.dx_mm)
+                    .floor()
+                    .min(cols as f64 - 1.0);
                 let i0 = ((s.y_mm - reach - grid.y0_mm) / grid.dy_mm).ceil().max(0.0);
-                let i1 = ((s.y_mm + reach - grid.y0_mm) / grid.dy_mm).floor().min(rows as f64 - 1.0);
+                let i1 = ((s.y_mm + reach - grid.y0_mm) / grid.dy_mm)
+                    .floor()
+                    .min(rows as f64 - 1.0);
                 if j1 < j0 || i1 < i0 {
                     continue;
                 }
@@ -39,7 +43,12 @@ pub fn deposit(grid: &MapGrid, tif: &TrueTif, steps: &[Instant]) -> Array2<f64> 
                 for i in i0 as usize..=i1 as usize {
                     let y = grid.y_mm(i) - s.y_mm;
                     let row = &mut acc[i * cols..(i + 1) * cols];
-                    for (j, a) in row.iter_mut().enumerate().take(j1 as usize + 1).skip(j0 as usize) {
+                    for (j, a) in row
+                        .iter_mut()
+                        .enumerate()
+                        .take(j1 as usize + 1)
+                        .skip(j0 as usize)
+                    {
                         *a += w * tif.rate(grid.x_mm(j) - s.x_mm, y, s.scale);
                     }
                 }
@@ -55,7 +64,9 @@ pub fn deposit(grid: &MapGrid, tif: &TrueTif, steps: &[Instant]) -> Array2<f64> 
                 a
             },
         )
-        .pipe(|v| Array2::from_shape_vec((rows, cols), v).unwrap_or_else(|_| Array2::zeros((rows, cols))))
+        .pipe(|v| {
+            Array2::from_shape_vec((rows, cols), v).unwrap_or_else(|_| Array2::zeros((rows, cols)))
+        })
 }
 
 trait Pipe: Sized {
@@ -71,9 +82,22 @@ mod tests {
 
     #[test]
     fn a_long_dwell_at_one_point_leaves_the_spot() {
-        let g = MapGrid { rows: 61, cols: 61, dx_mm: 0.5, dy_mm: 0.5, x0_mm: -15.0, y0_mm: -15.0 };
+        let g = MapGrid {
+            rows: 61,
+            cols: 61,
+            dx_mm: 0.5,
+            dy_mm: 0.5,
+            x0_mm: -15.0,
+            y0_mm: -15.0,
+        };
         let tif = TrueTif::default();
-        let steps = vec![Instant { x_mm: 0.0, y_mm: 0.0, dt_s: 10.0, rate_factor: 1.0, scale: 1.0 }];
+        let steps = vec![Instant {
+            x_mm: 0.0,
+            y_mm: 0.0,
+            dt_s: 10.0,
+            rate_factor: 1.0,
+            scale: 1.0,
+        }];
         let r = deposit(&g, &tif, &steps);
         assert!((r[(30, 30)] - 50.0).abs() < 1e-9);
         assert!((r[(30, 36)] - 10.0 * tif.rate(3.0, 0.0, 1.0)).abs() < 1e-9);

@@ -56,20 +56,54 @@ pub enum WiggleCoord {
 /// An effect injected into a run (the calibration is not told).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Injected {
-    Registration { dx_mm: f64, dy_mm: f64, rotation_deg: f64 },
-    RateDrift { fraction_per_run: f64 },
-    TifScale { scale: f64 },
-    DirectionLag { lag_mm: f64 },
-    PeriodicPathError { axis_x: bool, amplitude_mm: f64, period_mm: f64, phase_rad: f64, coord: WiggleCoord, waveform: Waveform },
-    RateCovariate { covariate: String, coefficient: f64 },
+    Registration {
+        dx_mm: f64,
+        dy_mm: f64,
+        rotation_deg: f64,
+    },
+    RateDrift {
+        fraction_per_run: f64,
+    },
+    TifScale {
+        scale: f64,
+    },
+    DirectionLag {
+        lag_mm: f64,
+    },
+    PeriodicPathError {
+        axis_x: bool,
+        amplitude_mm: f64,
+        period_mm: f64,
+        phase_rad: f64,
+        coord: WiggleCoord,
+        waveform: Waveform,
+    },
+    RateCovariate {
+        covariate: String,
+        coefficient: f64,
+    },
     /// Rate oscillating in time: factor 1 + a sin(2 pi t / period_s).
-    RateOscillation { amplitude_fraction: f64, period_s: f64 },
+    RateOscillation {
+        amplitude_fraction: f64,
+        period_s: f64,
+    },
     /// Pressure drift step: factor 1 + fraction after run-time fraction `at_tau`.
-    RateStep { at_tau: f64, fraction: f64 },
+    RateStep {
+        at_tau: f64,
+        fraction: f64,
+    },
     /// A local pit in the after surface (not removal by the tool): Gaussian, depth nm.
-    LocalDefect { x_mm: f64, y_mm: f64, radius_mm: f64, depth_nm: f64 },
+    LocalDefect {
+        x_mm: f64,
+        y_mm: f64,
+        radius_mm: f64,
+        depth_nm: f64,
+    },
     /// Constant offset of the executed spot from the commanded position.
-    PathOffset { dx_mm: f64, dy_mm: f64 },
+    PathOffset {
+        dx_mm: f64,
+        dy_mm: f64,
+    },
 }
 
 #[derive(Debug, Clone)]
@@ -151,7 +185,9 @@ impl Covariates<'_> {
             "x" => x,
             "y" => y,
             "feed" => feed,
-            "height" => self.surf.value(x, y) - (self.plane.0 + self.plane.1 * x + self.plane.2 * y),
+            "height" => {
+                self.surf.value(x, y) - (self.plane.0 + self.plane.1 * x + self.plane.2 * y)
+            }
             "slope" => {
                 let (gx, gy) = self.surf.gradient(x, y);
                 (gx - self.plane.1).hypot(gy - self.plane.2)
@@ -167,7 +203,11 @@ impl Covariates<'_> {
                     -ddx.hypot(ddy)
                 }
             }
-            other => return Err(CalibrateError::InvalidInput(format!("unknown covariate '{other}'"))),
+            other => {
+                return Err(CalibrateError::InvalidInput(format!(
+                    "unknown covariate '{other}'"
+                )))
+            }
         })
     }
 }
@@ -237,15 +277,34 @@ fn bicubic(a: &Array2<f64>, fi: f64, fj: f64) -> f64 {
 /// Generates a run.
 pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
     if cfg.rows < 16 || cfg.cols < 16 || cfg.pixel_mm <= 0.0 || cfg.pitch_mm <= 0.0 {
-        return Err(CalibrateError::InvalidInput("synthetic run: grid or pitch too small".into()));
+        return Err(CalibrateError::InvalidInput(
+            "synthetic run: grid or pitch too small".into(),
+        ));
     }
     let mut rng = Rng::new(cfg.seed);
     let d = cfg.pixel_mm;
-    let grid = MapGrid { rows: cfg.rows, cols: cfg.cols, dx_mm: d, dy_mm: d, x0_mm: 0.0, y0_mm: 0.0 };
+    let grid = MapGrid {
+        rows: cfg.rows,
+        cols: cfg.cols,
+        dx_mm: d,
+        dy_mm: d,
+        x0_mm: 0.0,
+        y0_mm: 0.0,
+    };
     let (wx, wy) = ((cfg.cols - 1) as f64 * d, (cfg.rows - 1) as f64 * d);
-    let surf = SurfaceFn::random(&mut rng, wx.max(wy), cfg.figure_rms_nm, cfg.msf_rms_nm, (0.04, 0.2));
+    let surf = SurfaceFn::random(
+        &mut rng,
+        wx.max(wy),
+        cfg.figure_rms_nm,
+        cfg.msf_rms_nm,
+        (0.04, 0.2),
+    );
     let plane = plane_fit(&surf, &grid);
-    let cov = Covariates { surf: &surf, plane, part: (-0.5 * d, wx + 0.5 * d, -0.5 * d, wy + 0.5 * d) };
+    let cov = Covariates {
+        surf: &surf,
+        plane,
+        part: (-0.5 * d, wx + 0.5 * d, -0.5 * d, wy + 0.5 * d),
+    };
 
     // Feed from a dwell map: more dwell (slower) where the figure is high.
     let fig_rms = cfg.figure_rms_nm.max(1e-9);
@@ -278,11 +337,20 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
         }
     }
     for k in 0..path.len() - 1 {
-        let (xa, ya, xb, yb) = (path.x_mm[k], path.y_mm[k], path.x_mm[k + 1], path.y_mm[k + 1]);
+        let (xa, ya, xb, yb) = (
+            path.x_mm[k],
+            path.y_mm[k],
+            path.x_mm[k + 1],
+            path.y_mm[k + 1],
+        );
         let len = (xb - xa).hypot(yb - ya);
         let dt_seg = path.t_s[k + 1] - path.t_s[k];
         let n = ((len / cfg.deposit_step_mm).ceil() as usize).max(1);
-        let (ux, uy) = if len > 0.0 { ((xb - xa) / len, (yb - ya) / len) } else { (0.0, 0.0) };
+        let (ux, uy) = if len > 0.0 {
+            ((xb - xa) / len, (yb - ya) / len)
+        } else {
+            (0.0, 0.0)
+        };
         let feed = len / dt_seg;
         for m in 0..n {
             let f = (m as f64 + 0.5) / n as f64;
@@ -293,29 +361,48 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
             let (mut x, mut y, mut rate) = (xc, yc, 1.0);
             for e in &cfg.effects {
                 match e {
-                    Injected::RateDrift { fraction_per_run } => rate *= 1.0 + fraction_per_run * tau,
+                    Injected::RateDrift { fraction_per_run } => {
+                        rate *= 1.0 + fraction_per_run * tau
+                    }
                     Injected::DirectionLag { lag_mm } => {
                         x -= lag_mm * ux;
                         y -= lag_mm * uy;
                     }
-                    Injected::PeriodicPathError { axis_x, amplitude_mm, period_mm, phase_rad, coord, waveform } => {
+                    Injected::PeriodicPathError {
+                        axis_x,
+                        amplitude_mm,
+                        period_mm,
+                        phase_rad,
+                        coord,
+                        waveform,
+                    } => {
                         let q = match coord {
                             WiggleCoord::X => xc,
                             WiggleCoord::Y => yc,
                             WiggleCoord::Arc => s_arc,
                         };
-                        let e = amplitude_mm * wave(*waveform, 2.0 * std::f64::consts::PI * q / period_mm + phase_rad);
+                        let e = amplitude_mm
+                            * wave(
+                                *waveform,
+                                2.0 * std::f64::consts::PI * q / period_mm + phase_rad,
+                            );
                         if *axis_x {
                             x += e;
                         } else {
                             y += e;
                         }
                     }
-                    Injected::RateCovariate { covariate, coefficient } => {
-                        rate *= 1.0 + coefficient * cov.value(covariate, t - t0, xc, yc, feed)?
-                    }
-                    Injected::RateOscillation { amplitude_fraction, period_s } => {
-                        rate *= 1.0 + amplitude_fraction * (2.0 * std::f64::consts::PI * (t - t0) / period_s).sin()
+                    Injected::RateCovariate {
+                        covariate,
+                        coefficient,
+                    } => rate *= 1.0 + coefficient * cov.value(covariate, t - t0, xc, yc, feed)?,
+                    Injected::RateOscillation {
+                        amplitude_fraction,
+                        period_s,
+                    } => {
+                        rate *= 1.0
+                            + amplitude_fraction
+                                * (2.0 * std::f64::consts::PI * (t - t0) / period_s).sin()
                     }
                     Injected::RateStep { at_tau, fraction } => {
                         if tau >= *at_tau {
@@ -329,19 +416,32 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
                     _ => {}
                 }
             }
-            steps.push(Instant { x_mm: x, y_mm: y, dt_s: dt_seg / n as f64, rate_factor: rate, scale });
+            steps.push(Instant {
+                x_mm: x,
+                y_mm: y,
+                dt_s: dt_seg / n as f64,
+                rate_factor: rate,
+                scale,
+            });
         }
         arc += len;
     }
     let removal = deposit::deposit(&grid, &cfg.tif, &steps);
 
     // Before map: truth + its own noise and dropouts.
-    let mut before = Array2::from_shape_fn((cfg.rows, cfg.cols), |(i, j)| surf.value(grid.x_mm(j), grid.y_mm(i)));
+    let mut before = Array2::from_shape_fn((cfg.rows, cfg.cols), |(i, j)| {
+        surf.value(grid.x_mm(j), grid.y_mm(i))
+    });
     // After map: truth at the misregistered positions.
     let (cx, cy) = grid.centre_mm();
     let (mut rdx, mut rdy, mut rth) = (0.0, 0.0, 0.0);
     for e in &cfg.effects {
-        if let Injected::Registration { dx_mm, dy_mm, rotation_deg } = e {
+        if let Injected::Registration {
+            dx_mm,
+            dy_mm,
+            rotation_deg,
+        } = e
+        {
             rdx += dx_mm;
             rdy += dy_mm;
             rth += rotation_deg.to_radians();
@@ -354,7 +454,13 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
         let (px, py) = (c * qx + s * qy + cx, -s * qx + c * qy + cy);
         let mut h = surf.value(px, py) - bicubic(&removal, py / d, px / d);
         for e in &cfg.effects {
-            if let Injected::LocalDefect { x_mm, y_mm, radius_mm, depth_nm } = e {
+            if let Injected::LocalDefect {
+                x_mm,
+                y_mm,
+                radius_mm,
+                depth_nm,
+            } = e
+            {
                 let r2 = (px - x_mm).powi(2) + (py - y_mm).powi(2);
                 h -= depth_nm * (-0.5 * r2 / (radius_mm * radius_mm)).exp();
             }
@@ -365,13 +471,19 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
     let mut va = Array2::from_elem((cfg.rows, cfg.cols), true);
     for (map, valid, setup) in [(&mut before, &mut vb, false), (&mut after, &mut va, true)] {
         let (tx, ty) = if setup {
-            (cfg.setup_tilt_nm * (rng.uniform() - 0.5) * 2.0, cfg.setup_tilt_nm * (rng.uniform() - 0.5) * 2.0)
+            (
+                cfg.setup_tilt_nm * (rng.uniform() - 0.5) * 2.0,
+                cfg.setup_tilt_nm * (rng.uniform() - 0.5) * 2.0,
+            )
         } else {
             (0.0, 0.0)
         };
         let piston = if setup { cfg.setup_piston_nm } else { 0.0 };
         for ((i, j), h) in map.indexed_iter_mut() {
-            *h += piston + tx * (grid.x_mm(j) / wx - 0.5) + ty * (grid.y_mm(i) / wy - 0.5) + cfg.noise_nm * rng.normal();
+            *h += piston
+                + tx * (grid.x_mm(j) / wx - 0.5)
+                + ty * (grid.y_mm(i) / wy - 0.5)
+                + cfg.noise_nm * rng.normal();
         }
         // Dropouts: isolated pixels plus a few small clusters.
         let n_drop = (cfg.dropout_fraction * (cfg.rows * cfg.cols) as f64) as usize;

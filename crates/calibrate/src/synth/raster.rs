@@ -23,7 +23,11 @@ pub fn raster(plan: &RasterPlan, feed_at: impl Fn(f64, f64) -> f64) -> PathLog {
     let mut now = 0.0;
     loop {
         // One line: integrate x' = +-feed(x, y) with midpoint steps of dt.
-        let (x_end, sgn) = if forward { (plan.x_max_mm, 1.0) } else { (plan.x_min_mm, -1.0) };
+        let (x_end, sgn) = if forward {
+            (plan.x_max_mm, 1.0)
+        } else {
+            (plan.x_min_mm, -1.0)
+        };
         let mut x = *xs.last().unwrap_or(&plan.x_min_mm);
         loop {
             let v1 = feed_at(x, y).max(1e-3);
@@ -60,7 +64,11 @@ pub fn raster(plan: &RasterPlan, feed_at: impl Fn(f64, f64) -> f64) -> PathLog {
         y += plan.pitch_mm;
         forward = !forward;
     }
-    PathLog { t_s: t, x_mm: xs, y_mm: ys }
+    PathLog {
+        t_s: t,
+        x_mm: xs,
+        y_mm: ys,
+    }
 }
 
 #[cfg(test)]
@@ -69,10 +77,21 @@ mod tests {
 
     #[test]
     fn constant_feed_line_takes_length_over_feed() {
-        let plan = RasterPlan { x_min_mm: 0.0, x_max_mm: 10.0, y_min_mm: 0.0, y_max_mm: 2.0, pitch_mm: 1.0, sample_hz: 10.0 };
+        let plan = RasterPlan {
+            x_min_mm: 0.0,
+            x_max_mm: 10.0,
+            y_min_mm: 0.0,
+            y_max_mm: 2.0,
+            pitch_mm: 1.0,
+            sample_hz: 10.0,
+        };
         let p = raster(&plan, |_, _| 2.0);
         // 3 lines of 10 mm + 2 step-overs of 1 mm at 2 mm/s
-        assert!((p.duration_s() - (30.0 + 2.0) / 2.0).abs() < 1e-9, "{}", p.duration_s());
+        assert!(
+            (p.duration_s() - (30.0 + 2.0) / 2.0).abs() < 1e-9,
+            "{}",
+            p.duration_s()
+        );
         assert!((p.y_mm.last().unwrap() - 2.0).abs() < 1e-12);
         assert!((p.x_mm.last().unwrap() - 10.0).abs() < 1e-12);
     }

@@ -21,31 +21,46 @@ impl SurfaceFn {
         msf_band_per_mm: (f64, f64),
     ) -> Self {
         let mut waves = Vec::new();
-        let mut band = |n: usize, f1: f64, f2: f64, rms: f64, waves: &mut Vec<(f64, f64, f64, f64)>| {
-            if rms <= 0.0 {
-                return;
-            }
-            let start = waves.len();
-            for _ in 0..n {
-                let f = f1 * (f2 / f1).powf(rng.uniform());
-                let ang = std::f64::consts::PI * rng.uniform();
-                let a = 1.0 / f.sqrt();
-                waves.push((a, f * ang.cos(), f * ang.sin(), 2.0 * std::f64::consts::PI * rng.uniform()));
-            }
-            let ms: f64 = waves[start..].iter().map(|w| w.0 * w.0 / 2.0).sum();
-            let k = rms / ms.sqrt();
-            for w in &mut waves[start..] {
-                w.0 *= k;
-            }
-        };
+        let mut band =
+            |n: usize, f1: f64, f2: f64, rms: f64, waves: &mut Vec<(f64, f64, f64, f64)>| {
+                if rms <= 0.0 {
+                    return;
+                }
+                let start = waves.len();
+                for _ in 0..n {
+                    let f = f1 * (f2 / f1).powf(rng.uniform());
+                    let ang = std::f64::consts::PI * rng.uniform();
+                    let a = 1.0 / f.sqrt();
+                    waves.push((
+                        a,
+                        f * ang.cos(),
+                        f * ang.sin(),
+                        2.0 * std::f64::consts::PI * rng.uniform(),
+                    ));
+                }
+                let ms: f64 = waves[start..].iter().map(|w| w.0 * w.0 / 2.0).sum();
+                let k = rms / ms.sqrt();
+                for w in &mut waves[start..] {
+                    w.0 *= k;
+                }
+            };
         band(10, 0.5 / size_mm, 3.0 / size_mm, figure_rms_nm, &mut waves);
-        band(30, msf_band_per_mm.0, msf_band_per_mm.1, msf_rms_nm, &mut waves);
+        band(
+            30,
+            msf_band_per_mm.0,
+            msf_band_per_mm.1,
+            msf_rms_nm,
+            &mut waves,
+        );
         SurfaceFn { waves }
     }
 
     pub fn value(&self, x: f64, y: f64) -> f64 {
         let tau = 2.0 * std::f64::consts::PI;
-        self.waves.iter().map(|&(a, fx, fy, p)| a * (tau * (fx * x + fy * y) + p).cos()).sum()
+        self.waves
+            .iter()
+            .map(|&(a, fx, fy, p)| a * (tau * (fx * x + fy * y) + p).cos())
+            .sum()
     }
 
     /// Gradient (nm/mm).

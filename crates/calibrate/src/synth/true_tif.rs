@@ -16,7 +16,13 @@ pub struct TrueTif {
 
 impl Default for TrueTif {
     fn default() -> Self {
-        TrueTif { peak_nm_per_s: 30.0, sigma_x_mm: 2.0, sigma_y_mm: 1.8, shoulder: 0.25, radius_mm: 7.5 }
+        TrueTif {
+            peak_nm_per_s: 30.0,
+            sigma_x_mm: 2.0,
+            sigma_y_mm: 1.8,
+            shoulder: 0.25,
+            radius_mm: 7.5,
+        }
     }
 }
 

@@ -24,7 +24,10 @@ pub fn write_run(dir: &Path, run: &SynthRun) -> Result<PathBuf, CalibrateError> 
     let mut csv = String::with_capacity(run.path.len() * 40 + 16);
     csv.push_str("t_s,x_mm,y_mm\n");
     for k in 0..run.path.len() {
-        csv.push_str(&format!("{},{},{}\n", run.path.t_s[k], run.path.x_mm[k], run.path.y_mm[k]));
+        csv.push_str(&format!(
+            "{},{},{}\n",
+            run.path.t_s[k], run.path.x_mm[k], run.path.y_mm[k]
+        ));
     }
     bonnetlab_io::atomic::write_atomic(&dir.join("path.csv"), csv.as_bytes()).map_err(io_err)?;
     let recipe = format!(
