@@ -65,6 +65,22 @@ pub fn file_stem(name: &str) -> String {
     }
 }
 
+/// File stems of the runs, made unique (distinct names can map to one stem, e.g. `a b`, `a_b`).
+pub fn run_stems(c: &Comparison) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for r in &c.runs {
+        let base = file_stem(&r.name);
+        let mut stem = base.clone();
+        let mut k = 2;
+        while out.contains(&stem) {
+            stem = format!("{base}_{k}");
+            k += 1;
+        }
+        out.push(stem);
+    }
+    out
+}
+
 /// Writes report.html, report.json and the CSVs into `dir` (created if missing); returns the
 /// paths written.
 pub fn write_report(dir: &Path, c: &Comparison) -> Result<Vec<PathBuf>, ReportError> {
@@ -78,13 +94,13 @@ pub fn write_report(dir: &Path, c: &Comparison) -> Result<Vec<PathBuf>, ReportEr
     let json_path = dir.join("report.json");
     write::json(&json_path, c)?;
     written.push(json_path);
-    for r in &c.runs {
+    for (r, stem) in c.runs.iter().zip(run_stems(c)) {
         for (axis, b, a) in [
             ("x", &r.psd.x_before, &r.psd.x_after),
             ("y", &r.psd.y_before, &r.psd.y_after),
         ] {
             if let (Some(b), Some(a)) = (b, a) {
-                let p = dir.join(format!("psd_{axis}_{}.csv", file_stem(&r.name)));
+                let p = dir.join(format!("psd_{axis}_{stem}.csv"));
                 write::csv_columns(
                     &p,
                     &["freq_per_mm", "psd_before_nm2_mm", "psd_after_nm2_mm"],
