@@ -8,7 +8,8 @@
 //! - Prominence (dB) = 10 log10(peak / background), peak = largest PSD value in the f0 band,
 //!   background = median of the PSD in the flanking windows h < |f - f0| <= h + max(2h, 8 df),
 //!   leaving out biased bins and every harmonic band. The median ignores a flank's own peaks.
-//! - `detected` = prominence >= threshold (default 6 dB). On a ripple-free map averaged over
+//! - `detected` = prominence >= threshold (default 6 dB) and the f0 band clear of the biased
+//!   lowest bins (a map only a few pitches long cannot show a ripple reliably). On a ripple-free map averaged over
 //!   many lines (>= 64) the prominence of noise is about 1 dB; with very few lines the PSD
 //!   estimate itself fluctuates by several dB, so raise the threshold for those.
 //! - y_over_x = sigma_1 from the Y PSD / band RMS of the X PSD over the same band (anisotropy).
@@ -156,6 +157,7 @@ pub fn ripple_from_psds(
         0.0
     };
     let sigma1_x = band_rms(x, f0 - h, f0 + h);
+    let biased = f0 - h < f_lo;
     Ok(Ripple {
         pitch_mm,
         f0_per_mm: f0,
@@ -168,10 +170,10 @@ pub fn ripple_from_psds(
         peak_nm2_mm: peak,
         background_nm2_mm: background,
         prominence_threshold_db: ropts.prominence_threshold_db,
-        detected: prominence_db >= ropts.prominence_threshold_db,
+        detected: prominence_db >= ropts.prominence_threshold_db && !biased,
         y_over_x: (sigma1_x > 0.0).then(|| sigma1 / sigma1_x),
         sigma1_x_nm: sigma1_x,
-        biased: f0 - h < f_lo,
+        biased,
         harmonics,
     })
 }
