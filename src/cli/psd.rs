@@ -446,14 +446,21 @@ fn summary(r: &PsdReport) -> String {
             "{name}: {} lines, {} segments, df {:.6} mm^-1, RMS above bin {} (unbiased) {:.4} nm",
             a.n_lines, a.n_segments, a.df_per_mm, a.biased_bins, a.rms_unbiased_nm
         ));
-        line(format!(
-            "  MSF band [{:.6}, {:.6}] mm^-1 (used [{:.6}, {:.6}]): {:.4} nm",
-            a.msf.f1_per_mm,
-            a.msf.f2_per_mm,
-            a.msf.f1_used_per_mm,
-            a.msf.f2_used_per_mm,
-            a.msf.rms_nm
-        ));
+        if a.msf.f1_used_per_mm > a.msf.f2_used_per_mm {
+            line(format!(
+                "  MSF band [{:.6}, {:.6}] mm^-1: outside this PSD's unbiased range",
+                a.msf.f1_per_mm, a.msf.f2_per_mm
+            ));
+        } else {
+            line(format!(
+                "  MSF band [{:.6}, {:.6}] mm^-1 (used [{:.6}, {:.6}]): {:.4} nm",
+                a.msf.f1_per_mm,
+                a.msf.f2_per_mm,
+                a.msf.f1_used_per_mm,
+                a.msf.f2_used_per_mm,
+                a.msf.rms_nm
+            ));
+        }
         if let Some(l) = &a.limit {
             line(format!(
                 "  limit {} f^-{} ({}) over [{}, {}] mm^-1: worst ratio {:.3} at {:.4} mm^-1: {}",
