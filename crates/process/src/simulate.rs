@@ -57,7 +57,16 @@ impl ToolModel {
             }
             TifSource::Bonnet(p) => {
                 let m = BonnetTif::new(p)?;
-                ToolModel::Bonnet(Tif::sample_antialiased(&m, dx_mm, dy_mm)?, Box::new(m))
+                // A footprint that falls to zero at its edge is point-sampled: that matches the
+                // exact deposition at pixel centres; a hard edge (uniform pressure) is
+                // anti-aliased so its area is right.
+                let t = match p.pressure {
+                    crate::tif::PressureProfile::Uniform => {
+                        Tif::sample_antialiased(&m, dx_mm, dy_mm)?
+                    }
+                    _ => Tif::sample(&m, dx_mm, dy_mm)?,
+                };
+                ToolModel::Bonnet(t, Box::new(m))
             }
         })
     }

@@ -124,6 +124,7 @@ pub struct BonnetTif {
     sin_t: f64,
     azimuths: Vec<(f64, f64)>,
     factor: f64,
+    volume: f64,
 }
 
 impl BonnetTif {
@@ -171,6 +172,7 @@ impl BonnetTif {
             sin_t: theta.sin(),
             azimuths,
             factor: 1.0,
+            volume: 0.0,
         };
         // Fix the scale numerically on a fine midpoint grid over the contact disc.
         let n = 400;
@@ -195,6 +197,7 @@ impl BonnetTif {
                 ))
             }
         };
+        m.volume = m.factor * vol;
         Ok(m)
     }
 
@@ -235,6 +238,10 @@ impl RateField for BonnetTif {
 
     fn half_extent_mm(&self) -> (f64, f64) {
         (self.a_mm, self.a_mm)
+    }
+
+    fn volume_rate_nm_mm2_per_s(&self) -> Option<f64> {
+        Some(self.volume)
     }
 }
 

@@ -51,4 +51,15 @@ impl RateField for GaussianTif {
     fn half_extent_mm(&self) -> (f64, f64) {
         (self.diameter_mm / 2.0, self.diameter_mm / 2.0)
     }
+
+    fn volume_rate_nm_mm2_per_s(&self) -> Option<f64> {
+        let s2 = self.sigma_mm * self.sigma_mm;
+        let r2 = self.diameter_mm * self.diameter_mm / 4.0;
+        Some(
+            2.0 * std::f64::consts::PI
+                * s2
+                * self.peak_rate_nm_per_s
+                * (1.0 - (-r2 / (2.0 * s2)).exp()),
+        )
+    }
 }
