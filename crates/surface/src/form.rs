@@ -297,6 +297,15 @@ pub fn fit_terms(s: &Surface, terms: &[Term]) -> Result<FormFit, SurfaceError> {
             have,
         });
     }
+    if let Some(r) = low_order_gram_r(s, &fit, terms, nb) {
+        let sol = solve_from_r(&r.r, nb + 1);
+        fit.coefficients_nm = sol.coefficients;
+        if let Some(k) = r.piston_index {
+            fit.coefficients_nm[k] += r.shift_nm;
+        }
+        fit.dropped = sol.dropped;
+        return Ok(fit);
+    }
     let sx = s.dx_mm.unwrap_or(1.0);
     let sy = s.dy_mm.unwrap_or(1.0);
     let p = nb + 1;
@@ -335,12 +344,156 @@ pub fn fit_terms(s: &Surface, terms: &[Term]) -> Result<FormFit, SurfaceError> {
     Ok(fit)
 }
 
+/// The triangular factor of [A | z - shift] for piston / tilt / power fits, from the Gram
+/// matrix (see `low_order_gram_r`).
+struct GramR {
+    r: Vec<f64>,
+    shift_nm: f64,
+    piston_index: Option<usize>,
+}
+
+/// Fast path for the everyday fits (piston, tilt, power: at most 4 functions of the
+/// normalised coordinates). These are near-orthogonal on [-1, 1]^2 (condition number of A a
+/// few units), so the Gram matrix G = [A | z]^T [A | z] loses nothing that matters for the
+/// coefficients, and accumulating it is a few multiply-adds per pixel instead of a Householder
+/// update. The heights are shifted by a reference value first (undone on the piston
+/// coefficient) so a large piston does not cancel. R comes from a Cholesky factorisation of G;
+/// a vanishing pivot leaves a zero row, which `solve_from_r` reports as a dependent column.
+/// Bands are summed in a fixed order, so the result does not depend on the thread count.
+fn low_order_gram_r(s: &Surface, fit: &FormFit, terms: &[Term], nb: usize) -> Option<GramR> {
+    if !terms
+        .iter()
+        .all(|t| matches!(t, Term::Piston | Term::Tilt | Term::Power))
+    {
+        return None;
+    }
+    let p = nb + 1;
+    let piston_index = terms
+        .iter()
+        .position(|t| *t == Term::Piston)
+        .map(|pos| terms[..pos].iter().map(Term::n_basis).sum::<usize>());
+    let shift_nm = if piston_index.is_some() {
+        s.valid_heights().next().unwrap_or(0.0)
+    } else {
+        0.0
+    };
+    let sx = s.dx_mm.unwrap_or(1.0);
+    let sy = s.dy_mm.unwrap_or(1.0);
+    let (rows, _) = s.dim();
+    let h = s.heights_nm();
+    let valid = s.valid();
+    let bands: Vec<Vec<f64>> = (0..rows.div_ceil(BAND_ROWS))
+        .into_par_iter()
+        .map(|band| {
+            let mut g = vec![0.0; p * p];
+            let mut row = [0.0f64; 5];
+            for i in band * BAND_ROWS..((band + 1) * BAND_ROWS).min(rows) {
+                let v = (i as f64 * sy - fit.centre.1) / fit.half_extent;
+                for (j, (&z, &ok)) in h.row(i).iter().zip(valid.row(i)).enumerate() {
+                    if !ok {
+                        continue;
+                    }
+                    let u = (j as f64 * sx - fit.centre.0) / fit.half_extent;
+                    let mut k = 0;
+                    for t in terms {
+                        match t {
+                            Term::Piston => {
+                                row[k] = 1.0;
+                                k += 1;
+                            }
+                            Term::Tilt => {
+                                row[k] = u;
+                                row[k + 1] = v;
+                                k += 2;
+                            }
+                            _ => {
+                                row[k] = u * u + v * v;
+                                k += 1;
+                            }
+                        }
+                    }
+                    row[k] = z - shift_nm;
+                    for a in 0..p {
+                        let ra = row[a];
+                        for b in a..p {
+                            g[a * p + b] += ra * row[b];
+                        }
+                    }
+                }
+            }
+            g
+        })
+        .collect();
+    let mut g = vec![0.0; p * p];
+    for b in &bands {
+        for (acc, v) in g.iter_mut().zip(b) {
+            *acc += v;
+        }
+    }
+    // Upper Cholesky: G = R^T R, R row-major upper triangular.
+    let mut r = vec![0.0; p * p];
+    for j in 0..p {
+        let mut d = g[j * p + j];
+        for k in 0..j {
+            d -= r[k * p + j] * r[k * p + j];
+        }
+        if d <= g[j * p + j].abs() * 1e-10 || d <= 0.0 {
+            continue; // dependent column (or an exact fit of z): row j stays zero
+        }
+        let d = d.sqrt();
+        r[j * p + j] = d;
+        for c in j + 1..p {
+            let mut v = g[j * p + c];
+            for k in 0..j {
+                v -= r[k * p + j] * r[k * p + c];
+            }
+            r[j * p + c] = v / d;
+        }
+    }
+    Some(GramR {
+        r,
+        shift_nm,
+        piston_index,
+    })
+}
+
 /// Evaluates a fit on the surface's grid (all pixels).
 pub fn evaluate_fit(s: &Surface, fit: &FormFit) -> Array2<f64> {
     let sx = s.dx_mm.unwrap_or(1.0);
     let sy = s.dy_mm.unwrap_or(1.0);
     let mut out = Array2::zeros(s.dim());
     if fit.coefficients_nm.is_empty() {
+        return out;
+    }
+    let low_order = fit
+        .terms
+        .iter()
+        .all(|t| matches!(t, Term::Piston | Term::Tilt | Term::Power));
+    if low_order {
+        // Same basis as `Term::eval` on the `u, v` frame, without the per-pixel dispatch.
+        let mut c = [0.0f64; 4]; // piston, tilt u, tilt v, power
+        let mut k = 0;
+        for t in &fit.terms {
+            match t {
+                Term::Piston => c[0] = fit.coefficients_nm[k],
+                Term::Tilt => {
+                    c[1] = fit.coefficients_nm[k];
+                    c[2] = fit.coefficients_nm[k + 1];
+                }
+                _ => c[3] = fit.coefficients_nm[k],
+            }
+            k += t.n_basis();
+        }
+        out.axis_iter_mut(Axis(0))
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(i, mut row)| {
+                let v = (i as f64 * sy - fit.centre.1) / fit.half_extent;
+                for (j, o) in row.iter_mut().enumerate() {
+                    let u = (j as f64 * sx - fit.centre.0) / fit.half_extent;
+                    *o = c[0] + c[1] * u + c[2] * v + c[3] * (u * u + v * v);
+                }
+            });
         return out;
     }
     out.axis_iter_mut(Axis(0))
