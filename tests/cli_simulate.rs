@@ -1,0 +1,78 @@
+//! `bonnetlab simulate` end to end on a small generated run (Gaussian model TIF, raster log):
+//! the output files exist, the JSON holds the contract's fields, and the predicted removal's
+//! mean matches the analytic volume rate x dwell per area. (The issue's full generated-run check,
+//! measured spot + noise vs an independent deposition, is not written yet.)
+
+use std::process::Command;
+
+use bonnetlab::io::{write_surface, MapFormat};
+use bonnetlab::process::path::log::path_to_csv;
+use bonnetlab::process::RasterSpec;
+use bonnetlab::surface::Surface;
+use ndarray::Array2;
+
+#[test]
+fn simulate_writes_maps_json_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let before = Array2::from_shape_fn((160, 200), |(i, j)| {
+        let (x, y) = (j as f64 * 0.25, i as f64 * 0.25);
+        20.0 * ((x - 25.0).powi(2) + (y - 20.0).powi(2)) / 625.0 + 2.0 * (x / 7.0).sin()
+    });
+    let s = Surface::new(before, Some(0.25), Some(0.25)).unwrap();
+    write_surface(&d.join("before.dat"), &s, MapFormat::MetroProDat).unwrap();
+    let mut spec = RasterSpec::over_rect((-6.0, 56.0), (-6.0, 46.0), 2.0, 4.0);
+    spec.sample_dt_s = 0.2;
+    let path = spec.generate().unwrap();
+    std::fs::write(d.join("path.csv"), path_to_csv(&path)).unwrap();
+    std::fs::write(
+        d.join("recipe.toml"),
+        "[measurement]\nbefore = \"before.dat\"\n[tif]\nmodel = { kind = \"gaussian\", sigma_mm = 1.0, \
+         peak_rate_nm_per_s = 10.0, diameter_mm = 8.0 }\n[path]\nlog = \"path.csv\"\npitch_mm = 2.0\n\
+         [process]\nbonnet = \"original\"\n",
+    )
+    .unwrap();
+    let out = d.join("out");
+    let o = Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
+        .args(["simulate"])
+        .arg(d.join("recipe.toml"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in [
+        "predicted_after.dat",
+        "predicted_removal.dat",
+        "simulation.json",
+        "predicted_psd_y.png",
+    ] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("simulation.json")).unwrap()).unwrap();
+    for k in ["rms_after_nm", "pv_after_nm", "cr_rms"] {
+        assert!(v[k].as_f64().is_some(), "{k}");
+    }
+    assert!(v["ripple"]["sigma1_nm"].as_f64().is_some());
+    assert_eq!(v["mechanisms"][0]["name"], "nominal_raster");
+    assert!((v["mechanisms"][0]["share"].as_f64().unwrap() - 1.0).abs() < 1e-12);
+    // Mean removal = volume rate / (pitch x feed): 2 pi sigma^2 peak (1 - e^-8) / (2 x 4).
+    let vol = 2.0 * std::f64::consts::PI * 10.0 * (1.0 - (-8.0f64).exp());
+    let expect = vol / 8.0;
+    let removal = bonnetlab::io::read_surface(&out.join("predicted_removal.dat")).unwrap();
+    let mean = removal.valid_heights().sum::<f64>() / removal.valid_count() as f64;
+    assert!((mean / expect - 1.0).abs() < 0.01, "{mean} vs {expect}");
+    // Bad recipe: one line naming the file and key, exit 2.
+    std::fs::write(d.join("bad.toml"), "[measurement]\nbefore = \"before.dat\"\n[tif]\nspot = \"s.dat\"\n[path]\nlog = \"p.csv\"\n").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
+        .arg("simulate")
+        .arg(d.join("bad.toml"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("bad.toml") && err.contains("dwell_s"), "{err}");
+}
