@@ -17,17 +17,26 @@ pub struct CliError {
 impl CliError {
     /// Bad input: exit code 2. `file` is named at the start of the message.
     pub fn input(file: impl AsRef<Path>, what: impl fmt::Display) -> Self {
-        CliError { code: EXIT_BAD_INPUT, message: format!("{}: {}", file.as_ref().display(), what) }
+        CliError {
+            code: EXIT_BAD_INPUT,
+            message: format!("{}: {}", file.as_ref().display(), what),
+        }
     }
 
     /// Usage error that concerns no file: exit code 2.
     pub fn usage(what: impl fmt::Display) -> Self {
-        CliError { code: EXIT_BAD_INPUT, message: what.to_string() }
+        CliError {
+            code: EXIT_BAD_INPUT,
+            message: what.to_string(),
+        }
     }
 
     /// Processing error on valid input: exit code 1.
     pub fn processing(file: impl AsRef<Path>, what: impl fmt::Display) -> Self {
-        CliError { code: EXIT_PROCESSING, message: format!("{}: {}", file.as_ref().display(), what) }
+        CliError {
+            code: EXIT_PROCESSING,
+            message: format!("{}: {}", file.as_ref().display(), what),
+        }
     }
 }
 

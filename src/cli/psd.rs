@@ -544,7 +544,7 @@ fn write_csv(out: &Path, r: &PsdReport) -> Result<(), CliError> {
             }
         }
     }
-    write_atomic(out, text.as_bytes())
+    bonnetlab_io::atomic::write_atomic(out, text.as_bytes())
         .map_err(|e| CliError::processing(out, format!("cannot write: {e}")))
 }
 
@@ -581,29 +581,6 @@ fn write_plot(
         _ => plot.to_png(),
     }
     .map_err(|e| CliError::processing(out, e))?;
-    write_atomic(out, &bytes).map_err(|e| CliError::processing(out, format!("cannot write: {e}")))
-}
-
-/// Whole-or-nothing output: a temporary file in the same directory, then a rename. (A small
-/// private version until bonnetlab_io's atomic writer is available.)
-fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
-    let res = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if res.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    res
+    bonnetlab_io::atomic::write_atomic(out, &bytes)
+        .map_err(|e| CliError::processing(out, format!("cannot write: {e}")))
 }

@@ -351,21 +351,8 @@ fn write_timeseries(
     write_atomic(&file, &buf)
 }
 
-/// Whole-or-nothing file write: a temporary file in the same directory, then rename.
+/// Whole-or-nothing file write (bonnetlab_io's temporary file + rename).
 fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = dir.join(format!(".{name}.tmp{}", std::process::id()));
-    let result = std::fs::write(&tmp, bytes).and_then(|_| std::fs::rename(&tmp, path));
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(CliError::input(path, format!("cannot write: {e}")));
-    }
-    Ok(())
+    bonnetlab_io::atomic::write_atomic(path, bytes)
+        .map_err(|e| CliError::input(path, format!("cannot write: {e}")))
 }
