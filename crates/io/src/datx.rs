@@ -7,12 +7,17 @@
 //! `Parameters[1..3]`; `NanoMeters`, `MicroMeters`, `MilliMeters`, `Meters` are scaled directly.
 //! Pixel size: `X Converter` / `Y Converter` `Parameters[1]` in m (0 -> unknown). Compound
 //! members are looked up by name, since some Mx files add members (SurfaceTopography #367).
+//! Every dataset read is first checked against the file size (`datx_bounds`), so a corrupt
+//! dataspace gives an error instead of a huge allocation.
 
 use hdf5_reader::{Attribute, Dataset, Datatype, Hdf5File};
 use ndarray::Array2;
 
 use bonnetlab_surface::{Provenance, Surface};
 
+use crate::datx_bounds::{
+    check_dataset_size, check_link_table, check_surface_pixels, open_options,
+};
 use crate::error::ParseError;
 use crate::text::unix_to_iso8601;
 
@@ -45,8 +50,9 @@ pub fn parse(bytes: &[u8]) -> Result<Surface, ParseError> {
 }
 
 fn parse_hdf5(bytes: &[u8]) -> Result<Surface, ParseError> {
-    let file = Hdf5File::from_bytes(bytes).map_err(|e| h5err("not a readable HDF5 file", e))?;
-    let links = read_link_table(&file)?;
+    let file = Hdf5File::from_bytes_with_options(bytes, open_options(bytes.len()))
+        .map_err(|e| h5err("not a readable HDF5 file", e))?;
+    let links = read_link_table(&file, bytes.len())?;
     let find = |src: &str, link: &str| {
         links
             .iter()
@@ -66,14 +72,17 @@ fn parse_hdf5(bytes: &[u8]) -> Result<Surface, ParseError> {
     let ds = file
         .dataset(&path)
         .map_err(|e| h5err(&format!("surface dataset {path}"), e))?;
-    let mut s = read_surface_dataset(&ds, &path)?;
+    let mut s = read_surface_dataset(&ds, &path, bytes.len())?;
     let attrs_group = find(&measurement, "Attributes");
     s.provenance = provenance(&file, &ds, attrs_group.as_deref());
     Ok(s)
 }
 
 /// The rows (Source, Link, Destination) of `/MetaData`.
-fn read_link_table(file: &Hdf5File) -> Result<Vec<(String, String, String)>, ParseError> {
+fn read_link_table(
+    file: &Hdf5File,
+    file_bytes: usize,
+) -> Result<Vec<(String, String, String)>, ParseError> {
     let md = file
         .dataset("/MetaData")
         .map_err(|e| h5err("no /MetaData link table", e))?;
@@ -88,9 +97,9 @@ fn read_link_table(file: &Hdf5File) -> Result<Vec<(String, String, String)>, Par
             .ok_or_else(|| ParseError::invalid(format!("/MetaData has no member {name}")))
     };
     let offs = [member("Source")?, member("Link")?, member("Destination")?];
-    let rec = md
-        .raw_element_size()
-        .map_err(|e| h5err("/MetaData record size", e))?;
+    let (records, rec) = check_dataset_size(&md, "/MetaData", file_bytes)?;
+    check_link_table(records, rec, file_bytes as u64)?;
+    let rec = rec as usize;
     let raw = md.read_raw_bytes().map_err(|e| h5err("/MetaData", e))?;
     let refsz = md.vlen_reference_size();
     let mut rows = Vec::new();
@@ -113,7 +122,11 @@ fn read_link_table(file: &Hdf5File) -> Result<Vec<(String, String, String)>, Par
     Ok(rows)
 }
 
-fn read_surface_dataset(ds: &Dataset, path: &str) -> Result<Surface, ParseError> {
+fn read_surface_dataset(
+    ds: &Dataset,
+    path: &str,
+    file_bytes: usize,
+) -> Result<Surface, ParseError> {
     let shape = ds.shape().to_vec();
     let [rows, cols] = shape[..] else {
         return Err(ParseError::invalid(format!(
@@ -125,18 +138,27 @@ fn read_surface_dataset(ds: &Dataset, path: &str) -> Result<Surface, ParseError>
             "surface dataset {path} is empty ({rows} x {cols})"
         )));
     }
-    let values: Vec<f64> = match ds.dtype() {
-        Datatype::FloatingPoint { size: 8, .. } => ds
-            .read_array::<f64>()
-            .map_err(|e| h5err(&format!("surface dataset {path}"), e))?
-            .into_iter()
-            .collect(),
-        Datatype::FloatingPoint { size: 4, .. } => ds
-            .read_array::<f32>()
-            .map_err(|e| h5err(&format!("surface dataset {path}"), e))?
-            .into_iter()
-            .map(f64::from)
-            .collect(),
+    let what = format!("surface dataset {path}");
+    check_surface_pixels(&what, rows, cols)?;
+    check_dataset_size(ds, &what, file_bytes)?;
+    let n = (rows * cols) as usize;
+    // Read straight into our own buffer (no intermediate array) and turn it into heights in
+    // place, so the peak is the heights plus the mask.
+    let mut values: Vec<f64> = match ds.dtype() {
+        Datatype::FloatingPoint { size: 8, .. } => {
+            let mut v = zeroed::<f64>(n, &what)?;
+            ds.read_into(&mut v).map_err(|e| h5err(&what, e))?;
+            v
+        }
+        Datatype::FloatingPoint { size: 4, .. } => {
+            let mut v = zeroed::<f32>(n, &what)?;
+            ds.read_into(&mut v).map_err(|e| h5err(&what, e))?;
+            let mut out = Vec::new();
+            out.try_reserve_exact(n)
+                .map_err(|e| h5err(&format!("{what}: {n} values"), e))?;
+            out.extend(v.into_iter().map(f64::from));
+            out
+        }
         other => {
             return Err(ParseError::invalid(format!(
                 "surface dataset {path} has type {other:?}, not a float"
@@ -204,13 +226,16 @@ fn read_surface_dataset(ds: &Dataset, path: &str) -> Result<Surface, ParseError>
     let dx = pixel("X Converter")?;
     let dy = pixel("Y Converter")?.or(dx);
     let dx = dx.or(dy);
-    let mut heights = Vec::with_capacity(values.len());
-    let mut valid = Vec::with_capacity(values.len());
-    for v in values {
-        let ok = v.is_finite() && v < no_data;
+    let mut valid = Vec::new();
+    valid
+        .try_reserve_exact(n)
+        .map_err(|e| h5err(&format!("{what}: mask of {n} pixels"), e))?;
+    for v in values.iter_mut() {
+        let ok = v.is_finite() && *v < no_data;
         valid.push(ok);
-        heights.push(if ok { v * scale_nm } else { 0.0 });
+        *v = if ok { *v * scale_nm } else { 0.0 };
     }
+    let heights = values;
     if !valid.iter().any(|&v| v) {
         return Err(ParseError::NoValidPixel);
     }
@@ -228,6 +253,15 @@ fn read_surface_dataset(ds: &Dataset, path: &str) -> Result<Surface, ParseError>
         }
     }
     Ok(s)
+}
+
+/// `n` zeroed values, failing cleanly (not aborting) when memory is short.
+fn zeroed<T: Default + Clone>(n: usize, what: &str) -> Result<Vec<T>, ParseError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(n)
+        .map_err(|e| h5err(&format!("{what}: {n} values"), e))?;
+    v.resize(n, T::default());
+    Ok(v)
 }
 
 /// An i32 member of a compound attribute, by name.

@@ -10,6 +10,7 @@
 pub mod atomic;
 pub mod csv_grid;
 pub mod datx;
+mod datx_bounds;
 pub mod detect;
 pub mod error;
 pub mod exr_map;

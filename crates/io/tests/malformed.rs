@@ -384,3 +384,48 @@ fn random_corruptions_never_panic() {
     // Both outcomes occur: corruptions inside the data block still read, header ones fail.
     assert!(outcomes[0] > 0 && outcomes[1] > 0, "{outcomes:?}");
 }
+
+/// The surface dataspace (rows, cols as two u64 LE) is overwritten: a contiguous surface
+/// larger than the file, or over the pixel cap, is refused before anything is allocated for it.
+#[test]
+fn datx_surface_dimensions_beyond_the_file() {
+    let Some(b) = real("monolithic_zygo_test.datx") else {
+        return;
+    };
+    let mut dims = [0u8; 16];
+    dims[..8].copy_from_slice(&259u64.to_le_bytes());
+    dims[8..].copy_from_slice(&33u64.to_le_bytes());
+    let at = b
+        .windows(16)
+        .position(|w| w == dims)
+        .expect("the 259 x 33 dataspace of the real file");
+    let patched = |rows: u64, cols: u64| {
+        let mut m = b.clone();
+        m[at..at + 8].copy_from_slice(&rows.to_le_bytes());
+        m[at + 8..at + 16].copy_from_slice(&cols.to_le_bytes());
+        m
+    };
+    // 10 360 x 33 f64 = 2 735 040 bytes in a 131 672-byte file.
+    let msg = expect(
+        "big.datx",
+        &patched(10_360, 33),
+        "declares 341880 elements of 8 bytes (2735040 bytes), more than the file size",
+        2,
+    );
+    assert!(msg.contains("surface dataset /Data/Surface/"), "{msg}");
+    expect(
+        "huge.datx",
+        &patched(1 << 20, 1 << 20),
+        "is 1048576 x 1048576 pixels, more than the 67108864 pixel limit",
+        2,
+    );
+    expect(
+        "overflow.datx",
+        &patched(u64::MAX / 2, 33),
+        "pixel limit",
+        2,
+    );
+    // Within the file size but not matching the stored data: still a clean error.
+    let (e, _d, _p) = fail("bit.datx", &patched(300, 33));
+    assert!(!e.to_string().contains('\n'), "{e}");
+}
