@@ -13,6 +13,16 @@
 //! mechanism imprints and its share of the summed band power. Without vibration coupling the only
 //! mechanism is `nominal_raster`: the MSF content of the predicted removal itself (the raster
 //! imprint of the TIF at the pitch). Vibration mechanisms are appended to the same array.
+//!
+//! Vibration coupling (bonnetlab_vibration::coupling, fast method) runs when the recipe has a
+//! `[process]` or `[vibration]` table or `--bonnet` is given, unless `--no-vibration`: its
+//! predicted removal replaces the nominal one, `nominal_raster` becomes the band RMS of the
+//! coupling's baseline (commanded path, no vibration) and the mechanisms `normal_offset`,
+//! `lateral_jitter`, `envelope`, `dwell_execution` and their `interaction` follow. Every `share`
+//! in the array is that entry's band power over the summed band power of all entries
+//! (`mechanism_share_basis` says so in the JSON); `vibration_share` is the library's share among
+//! the vibration entries only. `--sweep-rpm` adds the spindle-speed sweep (both bonnets):
+//! `spindle_sweep.csv`, a `spindle_sweep` JSON array and `spindle_sweep.png` (σ1 vs rpm).
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -26,6 +36,10 @@ use bonnetlab_spectrum::{
     MSF_DEFAULT_PER_MM,
 };
 use bonnetlab_surface::{height_stats, remove_terms, Surface, Term};
+use bonnetlab_vibration::coupling::predict::default_sweep_rpm;
+use bonnetlab_vibration::coupling::{self, CouplingInput, CouplingOptions, SweepRow};
+use bonnetlab_vibration::params::{Bonnet, VibrationParams};
+use bonnetlab_vibration::VibrationError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 
@@ -48,6 +62,12 @@ pub struct Args {
     /// Exact time-domain deposition instead of the fast FFT method (the reference; slower).
     #[arg(long)]
     pub exact: bool,
+    /// Leave the vibration coupling out (nominal removal only).
+    #[arg(long)]
+    pub no_vibration: bool,
+    /// Also sweep the spindle speed (250 to 2000 rpm) for both bonnets.
+    #[arg(long)]
+    pub sweep_rpm: bool,
     /// Output directory.
     #[arg(long)]
     pub out: PathBuf,
@@ -58,8 +78,12 @@ pub struct Args {
 pub struct Mechanism {
     pub name: String,
     pub msf_band_rms_nm: f64,
-    /// Fraction of the summed MSF band power (shares add up to 1).
+    /// Fraction of the summed MSF band power of all entries (shares add up to 1).
     pub share: f64,
+    pub enabled: bool,
+    /// The coupling library's share among the vibration entries only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vibration_share: Option<f64>,
 }
 
 /// Builds the mechanisms array from (name, band RMS) pairs: shares are power fractions.
@@ -71,6 +95,8 @@ pub fn mechanisms(parts: &[(&str, f64)]) -> Vec<Mechanism> {
             name: name.to_string(),
             msf_band_rms_nm: r,
             share: if total > 0.0 { r * r / total } else { 0.0 },
+            enabled: true,
+            vibration_share: None,
         })
         .collect()
 }
@@ -100,8 +126,35 @@ pub struct SimulationReport {
     pub ripple: Option<Ripple>,
     pub msf_band_per_mm: (f64, f64),
     pub mechanisms: Vec<Mechanism>,
+    /// What each mechanism's `share` is a fraction of.
+    pub mechanism_share_basis: String,
+    /// The coupling's figures for the simulated bonnet (null without vibration).
+    pub vibration: Option<VibrationSummary>,
+    /// Spindle-speed sweep rows (only with `--sweep-rpm`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spindle_sweep: Option<Vec<SweepRow>>,
     pub notes: Vec<String>,
 }
+
+/// The vibration coupling's prediction for the simulated bonnet.
+#[derive(Debug, Clone, Serialize)]
+pub struct VibrationSummary {
+    pub bonnet: String,
+    pub spindle_rpm: f64,
+    pub msf_band_per_mm: (f64, f64),
+    /// Y ripple of the predicted after map (σ1 at 1/pitch, harmonics; as `psd`).
+    pub ripple: Option<Ripple>,
+    /// MSF band RMS (Y) of the predicted removal, of the baseline and of the induced part, nm.
+    pub removal_msf_band_rms_nm: f64,
+    pub baseline_msf_band_rms_nm: f64,
+    pub induced_msf_band_rms_nm: f64,
+    /// σ1 at 1/pitch (Y) of the predicted and of the baseline removal, nm.
+    pub removal_ripple_sigma1_nm: Option<f64>,
+    pub baseline_removal_ripple_sigma1_nm: Option<f64>,
+}
+
+const SHARE_BASIS: &str = "fraction of the summed MSF band power (Y, msf_band_per_mm) of all \
+     entries of this array: share = msf_band_rms_nm^2 / sum(msf_band_rms_nm^2)";
 
 /// Everything `simulate` computes, before writing.
 pub struct Simulation {
@@ -144,12 +197,18 @@ fn progress(n: u64) -> ProgressBar {
     bar
 }
 
-/// Runs the simulation of a recipe (no files written).
-pub fn simulate_recipe(
-    recipe_file: &Path,
-    bonnet: Option<BonnetArg>,
-    exact: bool,
-) -> Result<Simulation, CliError> {
+fn verr(file: &Path, e: VibrationError) -> CliError {
+    match e {
+        VibrationError::InvalidParam { .. }
+        | VibrationError::UnknownKey(_)
+        | VibrationError::Conflict(..) => CliError::input(file, e),
+        _ => CliError::processing(file, e),
+    }
+}
+
+/// Runs the simulation of a recipe (no files written; `args.out` is not used).
+pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, CliError> {
+    let exact = args.exact;
     let bar = progress(6);
     let step = |msg: &str| {
         bar.set_message(msg.to_string());
@@ -173,9 +232,70 @@ pub fn simulate_recipe(
     step("path");
     let path = read_path_csv(&recipe.path_log).map_err(|e| perr(&recipe.path_log, e))?;
     step("removal");
-    let mode = if exact { Mode::Exact } else { Mode::Fast };
-    let prediction =
-        predict(&before, &tool, &path, None, mode).map_err(|e| perr(&recipe.before, e))?;
+    let bonnet_name = match args.bonnet {
+        Some(BonnetArg::Original) => "original".to_string(),
+        Some(BonnetArg::Suppression) => "suppression".to_string(),
+        None => recipe.process.bonnet.clone(),
+    };
+    let bonnet = if bonnet_name == "suppression" {
+        Bonnet::Suppression
+    } else {
+        Bonnet::Original
+    };
+    let with_vibration = !args.no_vibration
+        && (args.bonnet.is_some() || recipe.vibration.is_some() || has_process_table(recipe_file));
+    let mut notes = Vec::new();
+    let (prediction, vib, sweep) = if with_vibration || args.sweep_rpm {
+        let p = &recipe.process;
+        let params = VibrationParams::from_parts(
+            recipe.vibration.as_ref(),
+            p.spindle_rpm,
+            p.offset_mm,
+            p.inner_pressure_mpa,
+            None,
+        )
+        .map_err(|e| verr(recipe_file, e))?;
+        let input = CouplingInput {
+            grid,
+            valid: Some(before.valid()),
+            base_tif: tool.field(),
+            path: &path,
+            params: &params,
+            pitch_mm: recipe.pitch_mm,
+        };
+        let copts = CouplingOptions::default();
+        let sweep = if args.sweep_rpm {
+            Some(
+                coupling::spindle_sweep(&input, &copts, &default_sweep_rpm())
+                    .map_err(|e| verr(recipe_file, e))?,
+            )
+        } else {
+            None
+        };
+        if with_vibration {
+            let pred =
+                coupling::predict(&input, bonnet, &copts).map_err(|e| verr(recipe_file, e))?;
+            let prediction = prediction_from(&before, pred.removal_nm())
+                .map_err(|e| CliError::processing(&recipe.before, e))?;
+            if exact {
+                notes.push(
+                    "vibration coupling uses the fast method; --exact applies only without it"
+                        .to_string(),
+                );
+            }
+            (prediction, Some(pred), sweep)
+        } else {
+            let mode = if exact { Mode::Exact } else { Mode::Fast };
+            let prediction =
+                predict(&before, &tool, &path, None, mode).map_err(|e| perr(&recipe.before, e))?;
+            (prediction, None, sweep)
+        }
+    } else {
+        let mode = if exact { Mode::Exact } else { Mode::Fast };
+        let prediction =
+            predict(&before, &tool, &path, None, mode).map_err(|e| perr(&recipe.before, e))?;
+        (prediction, None, None)
+    };
     step("metrics");
     let terms = [Term::Piston, Term::Tilt];
     let figures = |s: &Surface| -> Result<(f64, f64), CliError> {
@@ -201,20 +321,52 @@ pub fn simulate_recipe(
     };
     let (f1, f2) = MSF_DEFAULT_PER_MM;
     let f2 = f2.min(py_r.freq_per_mm.last().copied().unwrap_or(f2));
-    let mech = mechanisms(&[("nominal_raster", band_rms(&py_r, f1, f2))]);
-    let bonnet_name = match bonnet {
-        Some(BonnetArg::Original) => "original".to_string(),
-        Some(BonnetArg::Suppression) => "suppression".to_string(),
-        None => recipe.process.bonnet.clone(),
+    let (mech, vibration) = match &vib {
+        None => {
+            notes.push("vibration coupling is not included in this prediction".to_string());
+            (
+                mechanisms(&[("nominal_raster", band_rms(&py_r, f1, f2))]),
+                None,
+            )
+        }
+        Some(pred) => {
+            let mut parts = vec![("nominal_raster", pred.baseline_msf_band_rms_nm)];
+            parts.extend(
+                pred.mechanisms
+                    .iter()
+                    .map(|m| (m.name.as_str(), m.msf_band_rms_nm)),
+            );
+            let mut mech = mechanisms(&parts);
+            for (m, lib) in mech.iter_mut().skip(1).zip(&pred.mechanisms) {
+                m.enabled = lib.enabled;
+                m.vibration_share = Some(lib.share);
+            }
+            let summary = VibrationSummary {
+                bonnet: pred.bonnet.name().to_string(),
+                spindle_rpm: pred.spindle_rpm,
+                msf_band_per_mm: pred.msf_band_per_mm,
+                ripple: ripple.clone(),
+                removal_msf_band_rms_nm: pred.removal_msf_band_rms_nm,
+                baseline_msf_band_rms_nm: pred.baseline_msf_band_rms_nm,
+                induced_msf_band_rms_nm: pred.induced_msf_band_rms_nm,
+                removal_ripple_sigma1_nm: pred.ripple_sigma1_nm,
+                baseline_removal_ripple_sigma1_nm: pred.baseline_ripple_sigma1_nm,
+            };
+            (mech, Some(summary))
+        }
     };
-    let mut notes = vec!["vibration coupling is not included in this prediction".to_string()];
     if recipe.pitch_mm.is_none() {
         notes.push("no [path] pitch_mm: ripple not evaluated".into());
     }
     let t = tool.sampled();
     let report = SimulationReport {
         recipe: recipe_file.display().to_string(),
-        mode: if exact { "exact" } else { "fast" }.into(),
+        mode: if exact && vib.is_none() {
+            "exact"
+        } else {
+            "fast"
+        }
+        .into(),
         bonnet: bonnet_name,
         removed: terms.to_vec(),
         rms_before_nm: rms_b,
@@ -241,6 +393,9 @@ pub fn simulate_recipe(
         ripple,
         msf_band_per_mm: (f1, f2),
         mechanisms: mech,
+        mechanism_share_basis: SHARE_BASIS.to_string(),
+        vibration,
+        spindle_sweep: sweep,
         notes,
     };
     step("done");
@@ -254,8 +409,65 @@ pub fn simulate_recipe(
     })
 }
 
+/// Whether the recipe file has a `[process]` table (the parsed recipe fills defaults).
+fn has_process_table(recipe_file: &Path) -> bool {
+    std::fs::read_to_string(recipe_file)
+        .ok()
+        .and_then(|t| t.parse::<toml::Table>().ok())
+        .is_some_and(|t| t.contains_key("process"))
+}
+
+/// A prediction (removal, after = before - removal) from a removal map on the before grid.
+fn prediction_from(
+    before: &Surface,
+    removal_nm: ndarray::Array2<f64>,
+) -> Result<Prediction, bonnetlab_surface::SurfaceError> {
+    let mut after = before.with_heights(before.heights_nm() - &removal_nm)?;
+    let mut removal = before.with_heights(removal_nm)?;
+    removal.removed.clear();
+    removal.provenance.format = "synthetic".into();
+    removal.provenance.comment =
+        Some("predicted removal with vibration coupling (nm, positive = removed)".into());
+    after.provenance.format = "synthetic".into();
+    after.provenance.comment = Some("predicted after map with vibration coupling".into());
+    Ok(Prediction { removal, after })
+}
+
+/// The sweep as CSV text: one row per (rpm, bonnet), mechanisms' band RMS as columns.
+fn sweep_csv(rows: &[SweepRow]) -> String {
+    let mut out = String::from(
+        "spindle_rpm,bonnet,x1_amplitude_mm,x2_amplitude_mm,offset_amplitude_mm,\
+         induced_msf_band_rms_nm,ripple_sigma1_nm",
+    );
+    if let Some(r) = rows.first() {
+        for m in &r.mechanisms {
+            out.push_str(&format!(",{}_msf_band_rms_nm", m.name));
+        }
+    }
+    out.push('\n');
+    for r in rows {
+        out.push_str(&format!(
+            "{},{},{:e},{:e},{:e},{:e},{}",
+            r.spindle_rpm,
+            r.bonnet.name(),
+            r.x1_amplitude_mm,
+            r.x2_amplitude_mm,
+            r.offset_amplitude_mm,
+            r.induced_msf_band_rms_nm,
+            r.ripple_sigma1_nm
+                .map(|v| format!("{v:e}"))
+                .unwrap_or_default()
+        ));
+        for m in &r.mechanisms {
+            out.push_str(&format!(",{:e}", m.msf_band_rms_nm));
+        }
+        out.push('\n');
+    }
+    out
+}
+
 pub fn run(args: &Args) -> Result<(), CliError> {
-    let sim = simulate_recipe(&args.recipe, args.bonnet, args.exact)?;
+    let sim = simulate_recipe(&args.recipe, args)?;
     write_outputs(&args.out, &sim)
 }
 
@@ -316,5 +528,25 @@ pub fn write_outputs(dir: &Path, sim: &Simulation) -> Result<(), CliError> {
         plot = plot.grating_markers(p, 3);
     }
     png("predicted_psd_y.png", plot.to_png())?;
+    if let Some(rows) = &sim.report.spindle_sweep {
+        report::write::bytes(&dir.join("spindle_sweep.csv"), sweep_csv(rows).as_bytes())
+            .map_err(werr)?;
+        let mut plot = report::plot::LinePlot::new(
+            "predicted removal ripple sigma1 (Y, 1/pitch) vs spindle speed",
+            "spindle speed (rpm)",
+            "sigma1 (nm)",
+        );
+        for b in Bonnet::ALL {
+            let (x, y): (Vec<f64>, Vec<f64>) = rows
+                .iter()
+                .filter(|r| r.bonnet == b)
+                .filter_map(|r| r.ripple_sigma1_nm.map(|s| (r.spindle_rpm, s)))
+                .unzip();
+            if !x.is_empty() {
+                plot = plot.series(report::plot::Series::new(b.name(), x, y));
+            }
+        }
+        png("spindle_sweep.png", plot.to_png())?;
+    }
     Ok(())
 }
