@@ -1,3 +1,56 @@
-//! Benchmarks (criterion) for this capability; see reports/performance.md.
+//! Calibration speed (criterion): an 800 x 800 run (0.125 mm pixels, 100 mm part) with the
+//! full candidate library and two undeclared effects (drift + misregistration), target
+//! <= 20 s on 2 cores; and a 400 x 400 run. The run is generated once (exact deposition, not
+//! timed); the timed part is `Problem::new` (path densification, covariates, FFT plans) plus
+//! `calibrate`. Results: reports/performance_calibrate.md.
+//!
+//! `cargo bench --bench calibrate`
 
-fn main() {}
+use bonnetlab::calibrate::model::Problem;
+use bonnetlab::calibrate::run::{calibrate, Options};
+use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig, SynthRun};
+use bonnetlab::calibrate::tif::TifMap;
+use criterion::{criterion_group, criterion_main, Criterion};
+
+fn make(n: usize) -> SynthRun {
+    let cfg = SynthConfig {
+        rows: n,
+        cols: n,
+        pixel_mm: 100.0 / n as f64,
+        deposit_step_mm: 0.2,
+        seed: 5,
+        effects: vec![
+            Injected::RateDrift {
+                fraction_per_run: -0.2,
+            },
+            Injected::Registration {
+                dx_mm: 0.2,
+                dy_mm: -0.15,
+                rotation_deg: 0.05,
+            },
+        ],
+        ..SynthConfig::default()
+    };
+    generate(&cfg).expect("synthetic run")
+}
+
+fn bench(c: &mut Criterion) {
+    let mut g = c.benchmark_group("calibrate");
+    g.sample_size(10);
+    for n in [400usize, 800] {
+        let run = make(n);
+        let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).expect("tif");
+        g.bench_function(format!("{n}x{n}_full_library"), |b| {
+            b.iter(|| {
+                let p = Problem::new(&run.before, &run.after, &tif, &run.path).expect("problem");
+                let cal = calibrate(&p, &Options::default()).expect("calibration");
+                assert_eq!(cal.effects.len(), 2);
+                cal
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

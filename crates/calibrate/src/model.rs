@@ -326,8 +326,8 @@ impl Problem {
     }
 
     /// The after map resampled through the registration (dx, dy, theta): value at each pixel
-    /// centre x of `after_file(R(theta) (x - c) + c + d)`; bicubic where the 4x4 neighbourhood
-    /// is valid, bilinear where its 2x2 core is, invalid otherwise.
+    /// centre x of `after_file(R(theta) (x - c) + c + d)`; Catmull-Rom bicubic where the 4x4
+    /// neighbourhood is valid, invalid otherwise.
     pub fn resample_after(&self, reg: [f64; 3]) -> (Array2<f64>, Array2<bool>) {
         let g = &self.grid;
         if reg == [0.0; 3] {
@@ -355,38 +355,32 @@ impl Problem {
                         && b < cc
                         && self.after_valid[(a as usize, b as usize)]
                 };
-                if !(ok(i0, j0) && ok(i0 + 1, j0) && ok(i0, j0 + 1) && ok(i0 + 1, j0 + 1)) {
+                // Bicubic only (one interpolation kernel everywhere, so the measured map is a
+                // smooth function of the registration parameters); invalid near dropouts.
+                if !(-1..3).all(|a| (-1..3).all(|b| ok(i0 + a, j0 + b))) {
                     continue;
                 }
                 let (ti, tj) = (fi - i0 as f64, fj - j0 as f64);
-                let all16 = (-1..3).all(|a| (-1..3).all(|b| ok(i0 + a, j0 + b)));
-                let v = if all16 {
-                    let wf = |t: f64| {
-                        [
-                            0.5 * (-t * t * t + 2.0 * t * t - t),
-                            0.5 * (3.0 * t * t * t - 5.0 * t * t + 2.0),
-                            0.5 * (-3.0 * t * t * t + 4.0 * t * t + t),
-                            0.5 * (t * t * t - t * t),
-                        ]
-                    };
-                    let (wi, wj) = (wf(ti), wf(tj));
-                    let mut acc = 0.0;
-                    for (a, wa) in wi.iter().enumerate() {
-                        for (b, wb) in wj.iter().enumerate() {
-                            acc += wa
-                                * wb
-                                * self.after[(
-                                    (i0 - 1 + a as isize) as usize,
-                                    (j0 - 1 + b as isize) as usize,
-                                )];
-                        }
-                    }
-                    acc
-                } else {
-                    let at = |a: isize, b: isize| self.after[(a as usize, b as usize)];
-                    (1.0 - ti) * ((1.0 - tj) * at(i0, j0) + tj * at(i0, j0 + 1))
-                        + ti * ((1.0 - tj) * at(i0 + 1, j0) + tj * at(i0 + 1, j0 + 1))
+                let wf = |t: f64| {
+                    [
+                        0.5 * (-t * t * t + 2.0 * t * t - t),
+                        0.5 * (3.0 * t * t * t - 5.0 * t * t + 2.0),
+                        0.5 * (-3.0 * t * t * t + 4.0 * t * t + t),
+                        0.5 * (t * t * t - t * t),
+                    ]
                 };
+                let (wi, wj) = (wf(ti), wf(tj));
+                let mut v = 0.0;
+                for (a, wa) in wi.iter().enumerate() {
+                    for (b, wb) in wj.iter().enumerate() {
+                        v += wa
+                            * wb
+                            * self.after[(
+                                (i0 - 1 + a as isize) as usize,
+                                (j0 - 1 + b as isize) as usize,
+                            )];
+                    }
+                }
                 out[(i, j)] = v;
                 val[(i, j)] = true;
             }

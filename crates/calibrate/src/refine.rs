@@ -60,9 +60,11 @@ pub fn jacobian(
             r
         };
         cols.push(
+            // Pixels whose validity changes with the step carry no derivative information.
             r.iter()
                 .zip(&f0.resid)
-                .map(|(a, b)| (a - b) / steps[i])
+                .zip(ev.w.iter().zip(&ev0.w))
+                .map(|((a, b), (w1, w0))| if w1 == w0 { (a - b) / steps[i] } else { 0.0 })
                 .collect(),
         );
     }

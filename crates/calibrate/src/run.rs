@@ -207,6 +207,64 @@ fn uncertainties(
         .collect())
 }
 
+/// Tie-break order of effect kinds (spec table first).
+const PRIORITY: [&str; 10] = [
+    "registration",
+    "rate_drift",
+    "tif_scale",
+    "direction_lag",
+    "periodic_path_error",
+    "rate_covariate",
+    "path_offset",
+    "rate_step",
+    "rate_oscillation",
+    "rate_profile_time",
+];
+
+fn priority(kind: &str) -> usize {
+    PRIORITY
+        .iter()
+        .position(|k| *k == kind)
+        .unwrap_or(PRIORITY.len())
+}
+
+/// Backward check of the accepted rate effects (exactly linear columns): each must still be
+/// significant on held-out data given all the others; the first that is not is dropped (for
+/// example a rate-vs-y term accepted early that a later time drift makes redundant).
+fn prune(
+    p: &Problem,
+    effects: &mut Vec<Box<dyn Effect>>,
+    accepted: &mut Vec<(String, f64, f64, Score)>,
+    sp: &crate::selection::Split,
+) {
+    let ev = crate::model::evaluate(p, effects, None);
+    for (k, e) in effects.iter().enumerate() {
+        let names: Vec<String> = e.rate_terms(p).into_iter().map(|(n, _)| n).collect();
+        if names.is_empty() {
+            continue;
+        }
+        let keep: Vec<usize> = (0..ev.names.len())
+            .filter(|i| !names.contains(&ev.names[*i]))
+            .collect();
+        let extra: Vec<Vec<f64>> = (0..ev.names.len())
+            .filter(|i| names.contains(&ev.names[*i]))
+            .map(|i| ev.cols[i].clone())
+            .collect();
+        let reduced = Eval {
+            names: keep.iter().map(|&i| ev.names[i].clone()).collect(),
+            cols: keep.iter().map(|&i| ev.cols[i].clone()).collect(),
+            means: keep.iter().map(|&i| ev.means[i]).collect(),
+            ..clone_eval_shell(&ev)
+        };
+        let bg = base_gram(&reduced, sp);
+        if !holdout(&reduced, &extra, sp, &bg).significant() {
+            effects.remove(k);
+            accepted.remove(k);
+            return;
+        }
+    }
+}
+
 /// Runs the whole calibration on a prepared problem.
 pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateError> {
     let mut effects: Vec<Box<dyn Effect>> = Vec::new();
@@ -247,6 +305,8 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     let mut rounds = Vec::new();
     let mut accepted: Vec<(String, f64, f64, Score)> = Vec::new(); // key, rms before, rms after, score
     let mut blocked: Vec<String> = Vec::new();
+    let trace = std::env::var_os("BONNETLAB_TRACE").is_some();
+    let t0 = std::time::Instant::now();
     for _ in 0..opts.max_effects {
         let cur = Current {
             p,
@@ -258,6 +318,9 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             .into_iter()
             .filter(|c| !blocked.contains(&c.key))
             .collect();
+        if trace {
+            eprintln!("[{:?}] {} candidates built", t0.elapsed(), cands.len());
+        }
         let bg = base_gram(&ev, &sp);
         let scores: Vec<Score> = cands
             .par_iter()
@@ -276,7 +339,9 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                 .collect(),
         };
         // Parsimony: among significant candidates within 10 % of the best held-out reduction,
-        // the one with the fewest parameters (then the larger reduction) wins.
+        // the one with the fewest parameters wins, then the earlier kind in `PRIORITY` (the
+        // spec's table first: e.g. a time drift before a rate varying with y, which a raster
+        // makes nearly collinear), then the larger reduction.
         let top = scores
             .iter()
             .filter(|s| s.significant())
@@ -287,10 +352,11 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             .enumerate()
             .filter(|(_, s)| s.significant() && s.delta >= 0.9 * top)
             .min_by(|a, b| {
-                cands[a.0]
-                    .extra
+                let (ca, cb) = (&cands[a.0], &cands[b.0]);
+                ca.extra
                     .len()
-                    .cmp(&cands[b.0].extra.len())
+                    .cmp(&cb.extra.len())
+                    .then(priority(ca.kind).cmp(&priority(cb.kind)))
                     .then(b.1.delta.total_cmp(&a.1.delta))
             })
             .map(|(i, s)| (i, *s));
@@ -306,6 +372,9 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         let mut trial = effects.clone();
         trial.push(new);
         let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
+        if trace {
+            eprintln!("[{:?}] refined after {}", t0.elapsed(), cand.key);
+        }
         if f_t.rms() >= rms_before {
             blocked.push(cand.key.clone());
             rounds.push(round);
@@ -318,7 +387,13 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         ev = ev_t;
         f = f_t;
     }
-    if !effects.is_empty() {
+    // Every acceptance already refined all accepted effects jointly; refit only when the
+    // backward check dropped one.
+    let before_prune = effects.len();
+    if effects.len() > 1 {
+        prune(p, &mut effects, &mut accepted, &sp);
+    }
+    if effects.len() != before_prune {
         let (e2, f2) = refine(p, &mut effects, 2 * opts.refine_iters)?;
         ev = e2;
         f = f2;

@@ -152,7 +152,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
                 Coord::Arc => (4.0 * pix, wx.max(wy) / 3.0),
                 Coord::Time => (4.0 * pix / max_feed, wx.max(wy) / 3.0 / mean_feed.max(1e-9)),
             };
-            for (period, _) in spectral_peaks(&q, &h, pmin, pmax, 2) {
+            for (period, _) in spectral_peaks(&q, &h, pmin, pmax, 1) {
                 let w = 2.0 * std::f64::consts::PI / period;
                 let gs: Vec<f64> = q.iter().map(|v| (w * v).sin()).collect();
                 let gc: Vec<f64> = q.iter().map(|v| (w * v).cos()).collect();
