@@ -99,7 +99,7 @@ mod tests {
             scale: 1.0,
         }];
         let r = deposit(&g, &tif, &steps);
-        assert!((r[(30, 30)] - 50.0).abs() < 1e-9);
+        assert!((r[(30, 30)] - 10.0 * tif.peak_nm_per_s).abs() < 1e-9);
         assert!((r[(30, 36)] - 10.0 * tif.rate(3.0, 0.0, 1.0)).abs() < 1e-9);
         // volume = dt * integral of the rate: compare with a fine quadrature
         let vol: f64 = r.sum() * 0.25;
