@@ -241,7 +241,7 @@ fn parse_limit(args: &Args) -> Result<Option<LimitLine>, CliError> {
             )))
         }
     };
-    if !(a > 0.0) || f1 < 0.0 || f2 < f1 {
+    if a.is_nan() || a <= 0.0 || f1 < 0.0 || f2 < f1 {
         return Err(CliError::usage(format!(
             "--limit: need A > 0 and 0 <= F1 <= F2, got '{s}'"
         )));
@@ -514,7 +514,7 @@ fn summary(r: &PsdReport) -> String {
     o.trim_end().to_string()
 }
 
-fn axis_rows<'a>(r: &'a PsdReport) -> impl Iterator<Item = (&'static str, &'a AxisReport)> {
+fn axis_rows(r: &PsdReport) -> impl Iterator<Item = (&'static str, &AxisReport)> {
     [("x", r.x.as_ref()), ("y", r.y.as_ref())]
         .into_iter()
         .filter_map(|(n, a)| a.map(|a| (n, a)))

@@ -94,8 +94,9 @@ pub fn inverse(g: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
             if r != c {
                 let f = a[r][c];
                 if f != 0.0 {
-                    for k in 0..2 * n {
-                        a[r][k] -= f * a[c][k];
+                    let pivot_row = a[c].clone();
+                    for (ark, ack) in a[r].iter_mut().zip(&pivot_row).take(2 * n) {
+                        *ark -= f * ack;
                     }
                 }
             }

@@ -92,6 +92,8 @@ fn dot_sel(a: &[f64], b: &[f64], w: &[f64], sel: &[bool]) -> f64 {
 }
 
 /// Two-fold held-out score of adding `extra` columns to the current model.
+// Index loops fill a symmetric Gram matrix; iterators would hide the (row, column) pairing.
+#[allow(clippy::needless_range_loop)]
 pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Score {
     let nb = ev.cols.len();
     let ne = extra.len();
@@ -130,14 +132,12 @@ pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Scor
             if !test[i] || ev.w[i] == 0.0 {
                 continue;
             }
-            let mut pb = 0.0;
-            for a in 0..nb {
-                pb += cb[a] * ev.cols[a][i];
-            }
-            let mut pf = 0.0;
-            for a in 0..nb {
-                pf += cf[a] * ev.cols[a][i];
-            }
+            let pb: f64 = cb.iter().zip(&ev.cols).map(|(c, col)| c * col[i]).sum();
+            let mut pf: f64 = cf[..nb]
+                .iter()
+                .zip(&ev.cols)
+                .map(|(c, col)| c * col[i])
+                .sum();
             for e in 0..ne {
                 pf += cf[nb + e] * extra[e][i];
             }

@@ -201,7 +201,10 @@ fn spindle_sweep_shows_the_resonance() {
     // Fast method only; resonance of x2 at 558 rpm raises the vibration-induced MSF of the
     // original bonnet above its off-resonance value, and the suppression bonnet stays lower.
     let r = run_lines(9.0);
-    let params = VibrationParams { fn_n: 3.0, ..Default::default() };
+    let params = VibrationParams {
+        fn_n: 3.0,
+        ..Default::default()
+    };
     let input = CouplingInput {
         grid: r.grid,
         valid: None,
@@ -211,11 +214,15 @@ fn spindle_sweep_shows_the_resonance() {
         pitch_mm: Some(3.0),
     };
     let opts = CouplingOptions {
-        mechanisms: Mechanisms { dwell_execution: false, ..Mechanisms::ALL },
+        mechanisms: Mechanisms {
+            dwell_execution: false,
+            ..Mechanisms::ALL
+        },
         sample_hz: 500.0,
         ..Default::default()
     };
-    let rows = bonnetlab_vibration::coupling::spindle_sweep(&input, &opts, &[558.0, 1500.0]).unwrap();
+    let rows =
+        bonnetlab_vibration::coupling::spindle_sweep(&input, &opts, &[558.0, 1500.0]).unwrap();
     assert_eq!(rows.len(), 4);
     for r in &rows {
         eprintln!(
@@ -227,7 +234,10 @@ fn spindle_sweep_shows_the_resonance() {
         );
     }
     let get = |rpm: f64, b: Bonnet| {
-        rows.iter().find(|r| r.spindle_rpm == rpm && r.bonnet == b).unwrap().induced_msf_band_rms_nm
+        rows.iter()
+            .find(|r| r.spindle_rpm == rpm && r.bonnet == b)
+            .unwrap()
+            .induced_msf_band_rms_nm
     };
     assert!(get(558.0, Bonnet::Original) > get(1500.0, Bonnet::Original));
     assert!(get(558.0, Bonnet::Suppression) < get(558.0, Bonnet::Original));

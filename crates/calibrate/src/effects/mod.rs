@@ -32,8 +32,11 @@ pub struct Candidate {
     pub kind: &'static str,
     pub extra: Vec<Vec<f64>>,
     /// (coefficients of `extra`, s0) -> effect.
-    pub make: Box<dyn Fn(&[f64], f64) -> Box<dyn Effect> + Send + Sync>,
+    pub make: MakeEffect,
 }
+
+/// Builds an effect from the coefficients of a candidate's extra columns and s0.
+pub type MakeEffect = Box<dyn Fn(&[f64], f64) -> Box<dyn Effect> + Send + Sync>;
 
 /// Everything detection needs about the current state.
 pub struct Current<'a> {
@@ -104,7 +107,7 @@ impl Current<'_> {
 /// grid, zero-padded x4, periodogram), between `p_min` and `p_max` (units of q), local maxima
 /// only, refined by parabolic interpolation of the log power. Returns up to `n` (period, power).
 pub fn spectral_peaks(q: &[f64], h: &[f64], p_min: f64, p_max: f64, n: usize) -> Vec<(f64, f64)> {
-    if q.is_empty() || !(p_min > 0.0) || p_max <= p_min {
+    if q.is_empty() || p_min.is_nan() || p_min <= 0.0 || p_max <= p_min {
         return Vec::new();
     }
     let (lo, hi) = q.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, &v| {

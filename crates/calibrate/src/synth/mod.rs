@@ -404,10 +404,8 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
                             + amplitude_fraction
                                 * (2.0 * std::f64::consts::PI * (t - t0) / period_s).sin()
                     }
-                    Injected::RateStep { at_tau, fraction } => {
-                        if tau >= *at_tau {
-                            rate *= 1.0 + fraction
-                        }
+                    Injected::RateStep { at_tau, fraction } if tau >= *at_tau => {
+                        rate *= 1.0 + fraction
                     }
                     Injected::PathOffset { dx_mm, dy_mm } => {
                         x += dx_mm;
