@@ -18,6 +18,9 @@ use bonnetlab::vibration::params::{Bonnet, VibrationParams};
 use ndarray::Array2;
 
 const PITCH_MM: f64 = 2.0;
+/// A strong force fluctuation near the 19.8 Hz principal mode, so the vibration-induced removal
+/// is well above the .dat count and the CLI-vs-library check can tell coupling on from off.
+const VIBRATION: &str = "[vibration]\nfn_n = 400.0\n";
 
 /// Writes before.dat, path.csv and recipe.toml into `d`; returns the recipe path.
 fn make_run(d: &Path) -> std::path::PathBuf {
@@ -27,17 +30,17 @@ fn make_run(d: &Path) -> std::path::PathBuf {
     });
     let s = Surface::new(before, Some(0.5), Some(0.5)).unwrap();
     write_surface(&d.join("before.dat"), &s, MapFormat::MetroProDat).unwrap();
-    let mut spec = RasterSpec::over_rect((-4.0, 36.0), (-4.0, 32.0), PITCH_MM, 20.0);
-    spec.sample_dt_s = 0.05;
+    let mut spec = RasterSpec::over_rect((-4.0, 36.0), (-4.0, 32.0), PITCH_MM, 5.0);
+    spec.sample_dt_s = 0.1;
     let path = spec.generate().unwrap();
     std::fs::write(d.join("path.csv"), path_to_csv(&path)).unwrap();
     let recipe = d.join("recipe.toml");
     std::fs::write(
         &recipe,
-        "[measurement]\nbefore = \"before.dat\"\n[tif]\nmodel = { kind = \"gaussian\", sigma_mm = 1.0, \
-         peak_rate_nm_per_s = 10.0, diameter_mm = 8.0 }\n[path]\nlog = \"path.csv\"\npitch_mm = 2.0\n\
-         [process]\nbonnet = \"original\"\nspindle_rpm = 1000.0\noffset_mm = 0.6\n\
-         inner_pressure_mpa = 0.25\n",
+        format!("[measurement]\nbefore = \"before.dat\"\n[tif]\nmodel = {{ kind = \"gaussian\", sigma_mm = 1.0, \
+         peak_rate_nm_per_s = 10.0, diameter_mm = 8.0 }}\n[path]\nlog = \"path.csv\"\npitch_mm = 2.0\n\
+         [process]\nbonnet = \"original\"\nspindle_rpm = 1188.0\noffset_mm = 0.6\n\
+         inner_pressure_mpa = 0.25\n{VIBRATION}"),
     )
     .unwrap();
     recipe
@@ -57,12 +60,15 @@ fn simulate(recipe: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
 }
 
 /// The library's prediction from the run's files, built without the CLI.
-fn library_removal(d: &Path, bonnet: Bonnet) -> Array2<f64> {
+/// Returns the predicted removal and its vibration-induced part (nm).
+fn library_removal(d: &Path, bonnet: Bonnet) -> (Array2<f64>, Array2<f64>) {
     let before = read_surface(&d.join("before.dat")).unwrap();
     let path = read_path_csv(&d.join("path.csv")).unwrap();
     let tif = GaussianTif::new(1.0, 8.0, 10.0).unwrap();
+    let table: toml::Table = VIBRATION.parse().unwrap();
+    let vib = table["vibration"].as_table().unwrap();
     let params =
-        VibrationParams::from_parts(None, Some(1000.0), Some(0.6), Some(0.25), None).unwrap();
+        VibrationParams::from_parts(Some(vib), Some(1188.0), Some(0.6), Some(0.25), None).unwrap();
     let input = CouplingInput {
         grid: Grid::of(&before).unwrap(),
         valid: Some(before.valid()),
@@ -71,9 +77,8 @@ fn library_removal(d: &Path, bonnet: Bonnet) -> Array2<f64> {
         params: &params,
         pitch_mm: Some(PITCH_MM),
     };
-    predict(&input, bonnet, &CouplingOptions::default())
-        .unwrap()
-        .removal_nm()
+    let p = predict(&input, bonnet, &CouplingOptions::default()).unwrap();
+    (p.removal_nm(), p.maps.induced())
 }
 
 #[test]
@@ -128,7 +133,7 @@ fn simulate_with_vibration_reports_mechanisms_per_bonnet() {
         induced.push(vib["induced_msf_band_rms_nm"].as_f64().unwrap());
 
         // Removal written by the CLI vs the library's predict() from the same files.
-        let lib = library_removal(
+        let (lib, lib_induced) = library_removal(
             d,
             if bonnet == "original" {
                 Bonnet::Original
@@ -146,14 +151,20 @@ fn simulate_with_vibration_reports_mechanisms_per_bonnet() {
             .map(|(a, b)| (a - b).abs())
             .fold(0.0f64, f64::max);
         assert!(peak > 1.0, "removal peak {peak} nm");
+        let induced_peak = lib_induced.iter().fold(0.0f64, |a, v| a.max(v.abs()));
         // .dat counts are W/65536 with W = 632.8 nm: a read is within half a count.
         let half_count_nm = 0.5 * 632.8 / 65536.0;
         assert!(
             max_diff <= half_count_nm * (1.0 + 1e-6),
             "{bonnet}: max |cli - lib| = {max_diff} nm (peak {peak} nm)"
         );
+        // The check is only meaningful when the coupling changes the removal by many counts.
+        assert!(
+            induced_peak > 20.0 * half_count_nm,
+            "{bonnet}: induced peak {induced_peak} nm"
+        );
         eprintln!(
-            "{bonnet}: induced MSF {:.4e} nm, sigma1 {:.4} nm, max diff {max_diff:.2e} nm, mechanisms {}",
+            "{bonnet}: induced MSF {:.4e} nm, sigma1 {:.4} nm, max diff {max_diff:.2e} nm, induced peak {induced_peak:.3e} nm, mechanisms {}",
             induced.last().unwrap(),
             ripple["sigma1_nm"].as_f64().unwrap(),
             serde_json::to_string(mech).unwrap()
@@ -172,4 +183,45 @@ fn simulate_with_vibration_reports_mechanisms_per_bonnet() {
     assert_eq!(mech[0]["name"], "nominal_raster");
     assert!((mech[0]["share"].as_f64().unwrap() - 1.0).abs() < 1e-12);
     assert!(v["vibration"].is_null());
+}
+
+#[test]
+fn simulate_sweep_rpm_writes_table_json_and_plot() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let recipe = make_run(d);
+    let out = d.join("out_sweep");
+    let v = simulate(&recipe, &out, &["--sweep-rpm"]);
+    let rows = v["spindle_sweep"].as_array().unwrap();
+    // 250..2000 rpm in 125 rpm steps, both bonnets.
+    assert_eq!(rows.len(), 15 * 2);
+    assert!(out.join("spindle_sweep.png").is_file());
+    let csv = std::fs::read_to_string(out.join("spindle_sweep.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 31);
+    assert!(lines[0].starts_with("spindle_rpm,bonnet,"));
+    for (row, line) in rows.iter().zip(&lines[1..]) {
+        let f: Vec<&str> = line.split(',').collect();
+        assert_eq!(
+            f[0].parse::<f64>().unwrap(),
+            row["spindle_rpm"].as_f64().unwrap()
+        );
+        assert_eq!(f[1], row["bonnet"].as_str().unwrap());
+        let s1: f64 = f[6].parse().unwrap();
+        assert!((s1 - row["ripple_sigma1_nm"].as_f64().unwrap()).abs() <= 1e-12 * s1.abs());
+    }
+    // Resonance: the original bonnet's induced MSF peaks inside the band, not at its ends, and
+    // the damped suppression bonnet's peak is lower.
+    let induced = |b: &str| -> Vec<f64> {
+        rows.iter()
+            .filter(|r| r["bonnet"] == b)
+            .map(|r| r["induced_msf_band_rms_nm"].as_f64().unwrap())
+            .collect()
+    };
+    let (o, s) = (induced("original"), induced("suppression"));
+    let max = |v: &[f64]| v.iter().cloned().fold(f64::MIN, f64::max);
+    eprintln!("induced MSF original {o:?}\nsuppression {s:?}");
+    assert!(max(&s) < max(&o), "{} vs {}", max(&s), max(&o));
+    let argmax = o.iter().position(|&v| v == max(&o)).unwrap();
+    assert!(argmax > 0 && argmax + 1 < o.len(), "peak at index {argmax}");
 }
