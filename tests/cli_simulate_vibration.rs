@@ -225,3 +225,27 @@ fn simulate_sweep_rpm_writes_table_json_and_plot() {
     let argmax = o.iter().position(|&v| v == max(&o)).unwrap();
     assert!(argmax > 0 && argmax + 1 < o.len(), "peak at index {argmax}");
 }
+
+#[test]
+fn bad_vibration_table_is_one_line_exit_2_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let recipe = make_run(d);
+    let text = std::fs::read_to_string(&recipe).unwrap() + "bogus_key = 1.0\n";
+    let bad = d.join("bad_vib.toml");
+    std::fs::write(&bad, text).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
+        .arg("simulate")
+        .arg(&bad)
+        .arg("--out")
+        .arg(d.join("out_bad"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("bad_vib.toml") && err.contains("bogus_key"),
+        "{err}"
+    );
+}
