@@ -132,3 +132,91 @@ fn same_numbers(a: &serde_json::Value, b: &serde_json::Value, at: &str) {
         _ => assert_eq!(a, b, "reports/demo/report.json is stale at {at}"),
     }
 }
+
+/// The committed report's `predicted_msf` (equal to a fresh run by the test above) against a
+/// direct call of the vibration crate on the run the demo describes, built here independently:
+/// the sample's 250 x 250 grid of 0.4 mm pixels, the paper's bonnet TIF (peak 10 nm/s), a 3 mm
+/// bidirectional raster at 1.6 mm/s over the 100 mm part, 1000 rpm, 0.6 mm, 0.25 MPa.
+#[test]
+fn predicted_msf_equals_the_vibration_crate() {
+    use bonnetlab_process::path::RasterSpec;
+    use bonnetlab_process::tif::bonnet::{BonnetTif, BonnetTifParams};
+    use bonnetlab_process::Grid;
+    use bonnetlab_vibration::coupling::{predict, CouplingInput, CouplingOptions};
+    use bonnetlab_vibration::params::{Bonnet, VibrationParams};
+
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let j: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(repo.join("reports/demo/report.json")).unwrap(),
+    )
+    .unwrap();
+    let preds = j["predicted_msf"].as_array().expect("predicted_msf array");
+    assert_eq!(preds.len(), 2);
+    assert_eq!(preds[0]["bonnet"], "original");
+    assert_eq!(preds[1]["bonnet"], "suppression");
+
+    let grid = Grid::new(250, 250, 0.4, 0.4, 0.2, 0.2).unwrap();
+    let tif = BonnetTif::new(&BonnetTifParams::paper(10.0)).unwrap();
+    let path = RasterSpec::over_rect((0.0, 100.0), (0.0, 100.0), 3.0, 1.6)
+        .generate()
+        .unwrap();
+    let params =
+        VibrationParams::from_parts(None, Some(1000.0), Some(0.6), Some(0.25), None).unwrap();
+    let input = CouplingInput {
+        grid,
+        valid: None,
+        base_tif: &tif,
+        path: &path,
+        params: &params,
+        pitch_mm: Some(3.0),
+    };
+    let opts = CouplingOptions::default();
+    let close = |a: f64, b: f64, what: &str| {
+        assert!(
+            (a - b).abs() <= 1e-9 * a.abs().max(b.abs()) + 1e-15,
+            "{what}: report {a} vs library {b}"
+        );
+    };
+    for (p, bonnet) in preds.iter().zip([Bonnet::Original, Bonnet::Suppression]) {
+        let run = &p["run"];
+        assert_eq!(run["spindle_rpm"].as_f64(), Some(1000.0));
+        assert_eq!(run["offset_mm"].as_f64(), Some(0.6));
+        assert_eq!(run["precession_deg"].as_f64(), Some(20.0));
+        assert_eq!(run["inner_pressure_mpa"].as_f64(), Some(0.25));
+        assert_eq!(run["pitch_mm"].as_f64(), Some(3.0));
+        let lib = predict(&input, bonnet, &opts).unwrap();
+        let mechs = p["mechanisms"].as_array().unwrap();
+        assert_eq!(mechs.len(), lib.mechanisms.len());
+        let mut share_sum = 0.0;
+        for (m, l) in mechs.iter().zip(&lib.mechanisms) {
+            assert_eq!(m["name"], l.name.as_str());
+            assert_eq!(m["enabled"], l.enabled);
+            let share = m["share"].as_f64().unwrap();
+            assert!(share.is_finite() && (0.0..=1.0).contains(&share), "{m}");
+            share_sum += share;
+            close(share, l.share, &format!("{bonnet:?} {} share", l.name));
+            close(
+                m["msf_band_rms_nm"].as_f64().unwrap(),
+                l.msf_band_rms_nm,
+                &format!("{bonnet:?} {} band RMS", l.name),
+            );
+        }
+        assert!((share_sum - 1.0).abs() < 1e-9, "shares sum to {share_sum}");
+        close(
+            p["ripple_sigma1_nm"].as_f64().unwrap(),
+            lib.ripple_sigma1_nm.unwrap(),
+            "sigma1",
+        );
+        close(
+            p["induced_msf_band_rms_nm"].as_f64().unwrap(),
+            lib.induced_msf_band_rms_nm,
+            "induced band RMS",
+        );
+        let band = p["msf_band_per_mm"].as_array().unwrap();
+        close(band[0].as_f64().unwrap(), lib.msf_band_per_mm.0, "band lo");
+        close(band[1].as_f64().unwrap(), lib.msf_band_per_mm.1, "band hi");
+    }
+    let html = std::fs::read_to_string(repo.join("reports/demo/report.html")).unwrap();
+    assert!(html.contains("Predicted MSF per bonnet"));
+    assert!(html.contains("dwell_execution"));
+}

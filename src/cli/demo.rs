@@ -4,17 +4,25 @@
 //!   two repeat measurements before and after for each bonnet) and their README, from a seed
 //!   (`crate::report::samples`);
 //! - `bonnetlab demo --out reports/demo` runs `compare` on the samples (default `samples/`,
-//!   pitch 3 mm, piston + tilt removed) and writes the report, showing its progress.
+//!   pitch 3 mm, piston + tilt removed) and writes the report, showing its progress; the report
+//!   also carries the vibration coupling's predicted MSF per bonnet on a run matching the sample
+//!   ([`predicted_msf`]: the paper's bonnet and process parameters, 3 mm raster, sample grid).
 
 use std::path::{Path, PathBuf};
 
 use super::compare::compare_with_progress;
 use super::CliError;
-use crate::report::compare_report::write_report;
+use crate::report::compare_report::write_report_with;
 use crate::report::comparison::{RunSpec, Settings};
+use crate::report::msf_prediction::{PredictedMsf, PredictionRun};
 use crate::report::samples::{
     generate, paper_bonnets, SAMPLE_N, SAMPLE_PITCH_MM, SAMPLE_PIXEL_MM, SAMPLE_SEED,
 };
+use bonnetlab_process::path::RasterSpec;
+use bonnetlab_process::tif::bonnet::{BonnetTif, BonnetTifParams};
+use bonnetlab_process::Grid;
+use bonnetlab_vibration::coupling::{predict_both, CouplingInput, CouplingOptions};
+use bonnetlab_vibration::params::VibrationParams;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -63,6 +71,75 @@ pub fn sample_runs(dir: &Path) -> Result<Vec<RunSpec>, CliError> {
         });
     }
     Ok(runs)
+}
+
+/// Peak removal rate of the paper-bonnet TIF in the prediction, nm/s (scales every band RMS
+/// linearly; chosen so a 100 mm raster removes of the order of a micrometre).
+pub const PREDICTION_TIF_PEAK_NM_PER_S: f64 = 10.0;
+/// Feed of the prediction's raster, mm/s (the paper's).
+pub const PREDICTION_FEED_MM_PER_S: f64 = 1.6;
+
+/// The vibration coupling for both bonnets on a run matching the sample: the 100 x 100 mm part
+/// on the sample's grid, the paper's bonnet TIF (R 20 mm, offset 0.6 mm, precession 20 deg,
+/// 1000 rpm), a 3 mm bidirectional raster and the vibration crate's defaults at 0.25 MPa.
+pub fn predicted_msf() -> Result<Vec<PredictedMsf>, CliError> {
+    let perr = |e: &dyn std::fmt::Display| CliError {
+        code: 1,
+        message: format!("demo: predicted MSF: {e}"),
+    };
+    let (n, d) = (SAMPLE_N, SAMPLE_PIXEL_MM);
+    let part_mm = n as f64 * d;
+    let grid = Grid::new(n, n, d, d, 0.5 * d, 0.5 * d).map_err(|e| perr(&e))?;
+    let tif_params = BonnetTifParams::paper(PREDICTION_TIF_PEAK_NM_PER_S);
+    let tif = BonnetTif::new(&tif_params).map_err(|e| perr(&e))?;
+    let path = RasterSpec::over_rect(
+        (0.0, part_mm),
+        (0.0, part_mm),
+        SAMPLE_PITCH_MM,
+        PREDICTION_FEED_MM_PER_S,
+    )
+    .generate()
+    .map_err(|e| perr(&e))?;
+    let inner_pressure_mpa = 0.25;
+    let params = VibrationParams::from_parts(
+        None,
+        Some(tif_params.spindle_rpm),
+        Some(tif_params.offset_mm),
+        Some(inner_pressure_mpa),
+        None,
+    )
+    .map_err(|e| perr(&e))?;
+    let input = CouplingInput {
+        grid,
+        valid: None,
+        base_tif: &tif,
+        path: &path,
+        params: &params,
+        pitch_mm: Some(SAMPLE_PITCH_MM),
+    };
+    let opts = CouplingOptions::default();
+    let preds = predict_both(&input, &opts).map_err(|e| perr(&e))?;
+    let run = PredictionRun {
+        part_mm: (part_mm, part_mm),
+        rows: n,
+        cols: n,
+        dx_mm: d,
+        dy_mm: d,
+        tif: "paper bonnet (R 20 mm, Hertz pressure, four-step precession)".into(),
+        tif_peak_rate_nm_per_s: PREDICTION_TIF_PEAK_NM_PER_S,
+        pitch_mm: SAMPLE_PITCH_MM,
+        feed_mm_per_s: PREDICTION_FEED_MM_PER_S,
+        spindle_rpm: tif_params.spindle_rpm,
+        offset_mm: tif_params.offset_mm,
+        precession_deg: tif_params.precession_deg,
+        inner_pressure_mpa,
+        sample_hz: opts.sample_hz,
+        seed: opts.seed,
+    };
+    Ok(preds
+        .iter()
+        .map(|p| PredictedMsf::new(run.clone(), p))
+        .collect())
 }
 
 fn readme(seed: u64, repeats: usize) -> String {
@@ -176,8 +253,29 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         ..Settings::default()
     };
     let c = compare_with_progress(&runs, &settings, true)?;
+    eprintln!(
+        "bonnetlab demo: predicting the MSF per bonnet (vibration coupling, {} mm raster)",
+        SAMPLE_PITCH_MM
+    );
+    let predicted = predicted_msf()?;
+    for p in &predicted {
+        let shares: Vec<String> = p
+            .mechanisms
+            .iter()
+            .map(|m| format!("{} {:.1} %", m.name, 100.0 * m.share))
+            .collect();
+        eprintln!(
+            "  {}: predicted Y ripple sigma1 {} nm, MSF band RMS {:.4} nm ({})",
+            p.bonnet,
+            p.ripple_sigma1_nm
+                .map(|v| format!("{v:.4}"))
+                .unwrap_or_else(|| "n/a".into()),
+            p.removal_msf_band_rms_nm,
+            shares.join(", ")
+        );
+    }
     eprintln!("bonnetlab demo: rendering the report (maps, PSD overlays, tables)");
-    let written = write_report(out, &c).map_err(|e| CliError {
+    let written = write_report_with(out, &c, Some(&predicted)).map_err(|e| CliError {
         code: 2,
         message: e.to_string(),
     })?;

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use super::comparison::{fmt_sig, Comparison, RunResult};
 use super::html::{Page, Table};
 use super::maps::{false_colour_png_with, valid_range, MapOptions};
+use super::msf_prediction::PredictedMsf;
 use super::plot::{LinePlot, Series, PALETTE};
 use super::write;
 
@@ -84,6 +85,25 @@ pub fn run_stems(c: &Comparison) -> Vec<String> {
 /// Writes report.html, report.json and the CSVs into `dir` (created if missing); returns the
 /// paths written.
 pub fn write_report(dir: &Path, c: &Comparison) -> Result<Vec<PathBuf>, ReportError> {
+    write_report_with(dir, c, None)
+}
+
+/// report.json: the comparison's keys, then `predicted_msf` when there is a prediction.
+#[derive(serde::Serialize)]
+struct ReportJson<'a> {
+    #[serde(flatten)]
+    comparison: &'a Comparison,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    predicted_msf: Option<&'a [PredictedMsf]>,
+}
+
+/// [`write_report`] plus, when given, the demo's "Predicted MSF per bonnet" section (HTML) and
+/// the `predicted_msf` array (JSON).
+pub fn write_report_with(
+    dir: &Path,
+    c: &Comparison,
+    predicted_msf: Option<&[PredictedMsf]>,
+) -> Result<Vec<PathBuf>, ReportError> {
     std::fs::create_dir_all(dir).map_err(|e| {
         ReportError(format!(
             "{}: cannot create the directory: {e}",
@@ -92,7 +112,13 @@ pub fn write_report(dir: &Path, c: &Comparison) -> Result<Vec<PathBuf>, ReportEr
     })?;
     let mut written = Vec::new();
     let json_path = dir.join("report.json");
-    write::json(&json_path, c)?;
+    write::json(
+        &json_path,
+        &ReportJson {
+            comparison: c,
+            predicted_msf,
+        },
+    )?;
     written.push(json_path);
     for (r, stem) in c.runs.iter().zip(run_stems(c)) {
         for (axis, b, a) in [
@@ -111,13 +137,21 @@ pub fn write_report(dir: &Path, c: &Comparison) -> Result<Vec<PathBuf>, ReportEr
         }
     }
     let html_path = dir.join("report.html");
-    write::bytes(&html_path, render_html(c)?.as_bytes())?;
+    write::bytes(&html_path, render_html_with(c, predicted_msf)?.as_bytes())?;
     written.push(html_path);
     Ok(written)
 }
 
 /// The self-contained HTML report.
 pub fn render_html(c: &Comparison) -> Result<String, ReportError> {
+    render_html_with(c, None)
+}
+
+/// [`render_html`] with the predicted MSF section after the ripple section.
+pub fn render_html_with(
+    c: &Comparison,
+    predicted_msf: Option<&[PredictedMsf]>,
+) -> Result<String, ReportError> {
     let mut page = Page::new("Bonnet run comparison");
     page.note(&format!(
         "{} {} \u{2014} {} run(s); form terms removed: {}; PSD window: {}{}.",
@@ -136,6 +170,9 @@ pub fn render_html(c: &Comparison) -> Result<String, ReportError> {
     bands_section(&mut page, c);
     if c.settings.pitch_mm.is_some() {
         ripple_section(&mut page, c);
+    }
+    if let Some(p) = predicted_msf {
+        super::msf_prediction::section(&mut page, p);
     }
     psd_section(&mut page, c)?;
     maps_section(&mut page, c)?;

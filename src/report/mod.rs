@@ -6,6 +6,7 @@ pub mod comparison;
 pub mod font;
 pub mod html;
 pub mod maps;
+pub mod msf_prediction;
 pub mod plot;
 pub mod samples;
 pub mod write;
