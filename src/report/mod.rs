@@ -8,5 +8,6 @@ pub mod html;
 pub mod maps;
 pub mod msf_prediction;
 pub mod plot;
+pub mod run_spec;
 pub mod samples;
 pub mod write;
