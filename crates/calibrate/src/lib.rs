@@ -14,6 +14,7 @@ pub mod model;
 pub mod noise;
 pub mod psd;
 pub mod refine;
+pub mod resample;
 pub mod run;
 pub mod selection;
 pub mod synth;

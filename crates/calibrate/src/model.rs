@@ -24,6 +24,7 @@ use crate::fftconv::{Convolver, Spectrum};
 use crate::grid::{sample, signed_edge_distance, smooth_masked, splat, MapGrid};
 use crate::lsq;
 use crate::path::{densify, PathLog, Samples};
+use crate::resample::Resampler;
 use crate::tif::{kernel_gradient, TifMap};
 
 /// Largest TIF widening the kernel frame leaves room for.
@@ -153,7 +154,11 @@ pub struct Problem {
     pub covariates: Covariates,
     pub tif_radius_mm: f64,
     kernels: Mutex<Vec<Arc<Kernels>>>,
+    resampler: Resampler,
+    resampled: ResampleCache,
 }
+
+type ResampleCache = Mutex<Vec<([f64; 3], Arc<(Array2<f64>, Array2<bool>)>)>>;
 
 impl Problem {
     pub fn new(
@@ -214,6 +219,7 @@ impl Problem {
             .map(|&k| (grid.y_mm(k / grid.cols) - cy) / half)
             .collect();
         let covariates = covariates(&grid, before, &samples);
+        let resampler = Resampler::new(&grid, after.heights_nm(), after.valid());
         Ok(Problem {
             grid,
             before: before.heights_nm().clone(),
@@ -229,6 +235,8 @@ impl Problem {
             covariates,
             tif_radius_mm: radius,
             kernels: Mutex::new(Vec::new()),
+            resampler,
+            resampled: Mutex::new(Vec::new()),
         })
     }
 
@@ -326,66 +334,23 @@ impl Problem {
     }
 
     /// The after map resampled through the registration (dx, dy, theta): value at each pixel
-    /// centre x of `after_file(R(theta) (x - c) + c + d)`; Catmull-Rom bicubic where the 4x4
-    /// neighbourhood is valid, invalid otherwise.
+    /// centre x of `after_file(R(theta) (x - c) + c + d)`, band-limited (see `resample`), with
+    /// its validity. The last few results are cached: refinement of the other effects asks
+    /// for the same registration many times.
     pub fn resample_after(&self, reg: [f64; 3]) -> (Array2<f64>, Array2<bool>) {
-        let g = &self.grid;
-        if reg == [0.0; 3] {
-            return (self.after.clone(), self.after_valid.clone());
-        }
-        let (cx, cy) = g.centre_mm();
-        let (c, s) = (reg[2].cos(), reg[2].sin());
-        let mut out = Array2::<f64>::zeros((g.rows, g.cols));
-        let mut val = Array2::from_elem((g.rows, g.cols), false);
-        let (r, cc) = (g.rows as isize, g.cols as isize);
-        for i in 0..g.rows {
-            for j in 0..g.cols {
-                let (x, y) = (g.x_mm(j) - cx, g.y_mm(i) - cy);
-                let (qx, qy) = (c * x - s * y + cx + reg[0], s * x + c * y + cy + reg[1]);
-                let fj = (qx - g.x0_mm) / g.dx_mm;
-                let fi = (qy - g.y0_mm) / g.dy_mm;
-                let (i0, j0) = (fi.floor() as isize, fj.floor() as isize);
-                if i0 < 0 || j0 < 0 || i0 + 1 >= r || j0 + 1 >= cc {
-                    continue;
-                }
-                let ok = |a: isize, b: isize| {
-                    a >= 0
-                        && b >= 0
-                        && a < r
-                        && b < cc
-                        && self.after_valid[(a as usize, b as usize)]
-                };
-                // Bicubic only (one interpolation kernel everywhere, so the measured map is a
-                // smooth function of the registration parameters); invalid near dropouts.
-                if !(-1..3).all(|a| (-1..3).all(|b| ok(i0 + a, j0 + b))) {
-                    continue;
-                }
-                let (ti, tj) = (fi - i0 as f64, fj - j0 as f64);
-                let wf = |t: f64| {
-                    [
-                        0.5 * (-t * t * t + 2.0 * t * t - t),
-                        0.5 * (3.0 * t * t * t - 5.0 * t * t + 2.0),
-                        0.5 * (-3.0 * t * t * t + 4.0 * t * t + t),
-                        0.5 * (t * t * t - t * t),
-                    ]
-                };
-                let (wi, wj) = (wf(ti), wf(tj));
-                let mut v = 0.0;
-                for (a, wa) in wi.iter().enumerate() {
-                    for (b, wb) in wj.iter().enumerate() {
-                        v += wa
-                            * wb
-                            * self.after[(
-                                (i0 - 1 + a as isize) as usize,
-                                (j0 - 1 + b as isize) as usize,
-                            )];
-                    }
-                }
-                out[(i, j)] = v;
-                val[(i, j)] = true;
+        if let Ok(cache) = self.resampled.lock() {
+            if let Some((_, hit)) = cache.iter().find(|(r, _)| *r == reg) {
+                return (hit.0.clone(), hit.1.clone());
             }
         }
-        (out, val)
+        let res = Arc::new(self.resampler.resample(reg));
+        if let Ok(mut cache) = self.resampled.lock() {
+            if cache.len() >= 4 {
+                cache.remove(0);
+            }
+            cache.push((reg, res.clone()));
+        }
+        (res.0.clone(), res.1.clone())
     }
 }
 

@@ -1,0 +1,314 @@
+//! Band-limited resampling of the after map through a registration transform (shift and small
+//! rotation), for an unbiased registration estimate.
+//!
+//! Why not bicubic: a short interpolation kernel low-passes what it resamples, and how much
+//! depends on the sub-pixel phase (Catmull-Rom at half a pixel keeps only 41 % of white-noise
+//! variance in 2-D). Fitting a registration by least squares then prefers shifts that smooth
+//! the measurement noise most and is pulled towards half-pixel offsets (0.2 mm came out as
+//! 0.148 mm on 0.25 mm pixels with 0.3 nm noise). Shifting by a phase ramp in the Fourier domain
+//! is unitary: noise variance does not depend on the shift, so neither does the bias.
+//!
+//! The rotation is three shears (Paeth / Unser): `R(theta) = Sx(a) Sy(b) Sx(a)` with
+//! `a = -tan(theta / 2)`, `b = sin(theta)`, each a 1-D sub-pixel shift that varies row by row
+//! (or column by column), and the translation is folded into the last two passes. Each line is
+//! mirror-extended to twice its length before its FFT so that its ends join continuously.
+//! Invalid pixels are first filled by linear interpolation along their row (the nearest filled
+//! row for empty rows); the output's validity is decided by the transform alone: valid where the
+//! 4 x 4 source neighbourhood of the mapped point is valid and on the map.
+//!
+//! Convention: `out(x) = after(R(theta) (x - c) + c + d)`, c = map centre, d = (dx_mm, dy_mm).
+
+use std::sync::Arc;
+
+use ndarray::Array2;
+use rayon::prelude::*;
+use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
+use rustfft::num_complex::Complex64;
+
+use crate::grid::MapGrid;
+
+/// Line shifter for one line length (plans shared between threads).
+struct LineShift {
+    n: usize,
+    r2c: Arc<dyn RealToComplex<f64>>,
+    c2r: Arc<dyn ComplexToReal<f64>>,
+}
+
+impl LineShift {
+    fn new(n: usize) -> Self {
+        let mut p = RealFftPlanner::<f64>::new();
+        LineShift {
+            n,
+            r2c: p.plan_fft_forward(2 * n),
+            c2r: p.plan_fft_inverse(2 * n),
+        }
+    }
+
+    /// Shifts every line of `lines` (rows of a row-major buffer of `n` columns) in place:
+    /// `line[j] <- f(j + shift(line index))`, f the band-limited interpolant of the mirrored line.
+    fn apply(&self, lines: &mut [f64], shift: &(dyn Fn(usize) -> f64 + Sync)) {
+        let n = self.n;
+        lines.par_chunks_mut(n).enumerate().for_each_init(
+            || {
+                (
+                    vec![0.0; 2 * n],
+                    self.r2c.make_output_vec(),
+                    self.r2c.make_scratch_vec(),
+                    self.c2r.make_scratch_vec(),
+                )
+            },
+            |(buf, spec, s1, s2), (li, line)| {
+                let s = shift(li);
+                if s == 0.0 {
+                    return;
+                }
+                buf[..n].copy_from_slice(line);
+                for j in 0..n {
+                    buf[2 * n - 1 - j] = line[j];
+                }
+                if self.r2c.process_with_scratch(buf, spec, s1).is_err() {
+                    return;
+                }
+                let m = 2 * n;
+                let step = 2.0 * std::f64::consts::PI * s / m as f64;
+                let rot = Complex64::new(step.cos(), step.sin());
+                let mut ph = Complex64::new(1.0, 0.0);
+                let last = spec.len() - 1;
+                for (k, v) in spec.iter_mut().enumerate() {
+                    if k == last {
+                        // Nyquist of an even-length real signal: only its real part survives.
+                        let c = (step * k as f64).cos();
+                        *v = Complex64::new(v.re * c, 0.0);
+                    } else {
+                        *v *= ph;
+                    }
+                    ph *= rot;
+                    if k % 64 == 63 {
+                        // Re-anchor the recurrence against rounding drift.
+                        let a = step * (k + 1) as f64;
+                        ph = Complex64::new(a.cos(), a.sin());
+                    }
+                }
+                spec[0].im = 0.0;
+                if self.c2r.process_with_scratch(spec, buf, s2).is_err() {
+                    return;
+                }
+                let inv = 1.0 / m as f64;
+                for (o, b) in line.iter_mut().zip(buf.iter()) {
+                    *o = b * inv;
+                }
+            },
+        );
+    }
+}
+
+/// The after map prepared once: gaps filled, plans made.
+pub struct Resampler {
+    grid: MapGrid,
+    filled: Array2<f64>,
+    valid: Array2<bool>,
+    rows: LineShift,
+    cols: LineShift,
+}
+
+/// Fills invalid pixels by linear interpolation along each row between its nearest valid pixels
+/// (constant beyond the last one); rows without any valid pixel copy the nearest filled row.
+fn fill_gaps(a: &Array2<f64>, valid: &Array2<bool>) -> Array2<f64> {
+    let (r, c) = a.dim();
+    let mut out = Array2::<f64>::zeros((r, c));
+    let mut has = vec![false; r];
+    for i in 0..r {
+        let idx: Vec<usize> = (0..c).filter(|&j| valid[(i, j)]).collect();
+        if idx.is_empty() {
+            continue;
+        }
+        has[i] = true;
+        let mut k = 0;
+        for j in 0..c {
+            while k + 1 < idx.len() && idx[k + 1] <= j {
+                k += 1;
+            }
+            let v = if j <= idx[0] {
+                a[(i, idx[0])]
+            } else if k + 1 >= idx.len() {
+                a[(i, idx[k])]
+            } else {
+                let (j0, j1) = (idx[k], idx[k + 1]);
+                let t = (j - j0) as f64 / (j1 - j0) as f64;
+                a[(i, j0)] * (1.0 - t) + a[(i, j1)] * t
+            };
+            out[(i, j)] = v;
+        }
+    }
+    if let Some(first) = has.iter().position(|h| *h) {
+        let mut src = first;
+        for i in 0..r {
+            if has[i] {
+                src = i;
+            } else {
+                let row = out.row(src).to_owned();
+                out.row_mut(i).assign(&row);
+            }
+        }
+    }
+    out
+}
+
+fn transpose(a: &[f64], rows: usize, cols: usize) -> Vec<f64> {
+    let mut t = vec![0.0; a.len()];
+    const B: usize = 32;
+    for i0 in (0..rows).step_by(B) {
+        for j0 in (0..cols).step_by(B) {
+            for i in i0..(i0 + B).min(rows) {
+                for j in j0..(j0 + B).min(cols) {
+                    t[j * rows + i] = a[i * cols + j];
+                }
+            }
+        }
+    }
+    t
+}
+
+impl Resampler {
+    pub fn new(grid: &MapGrid, after: &Array2<f64>, valid: &Array2<bool>) -> Self {
+        Resampler {
+            grid: *grid,
+            filled: fill_gaps(after, valid),
+            valid: valid.clone(),
+            rows: LineShift::new(grid.cols),
+            cols: LineShift::new(grid.rows),
+        }
+    }
+
+    /// The after map at `R(theta)(x - c) + c + d` for every pixel centre x, with its validity.
+    pub fn resample(&self, reg: [f64; 3]) -> (Array2<f64>, Array2<bool>) {
+        let g = &self.grid;
+        if reg == [0.0; 3] {
+            return (self.filled.clone(), self.valid.clone());
+        }
+        let (r, c) = (g.rows, g.cols);
+        let (cx, cy) = g.centre_mm();
+        let th = reg[2];
+        let (a, b) = (-(0.5 * th).tan(), th.sin());
+        // e = R(-theta) d: the translation applied after the rotation's shears.
+        let (ct, st) = (th.cos(), th.sin());
+        let (ex, ey) = (ct * reg[0] + st * reg[1], -st * reg[0] + ct * reg[1]);
+        let ymm = |i: usize| g.y_mm(i) - cy;
+        let xmm = |j: usize| g.x_mm(j) - cx;
+        let mut buf: Vec<f64> = self.filled.iter().cloned().collect();
+        // P1(w) = A(w_x + a w_y, w_y)
+        if a != 0.0 {
+            self.rows.apply(&mut buf, &|i| a * ymm(i) / g.dx_mm);
+        }
+        // P2(z) = P1(z_x, z_y + b z_x + e_y)
+        let mut t = transpose(&buf, r, c);
+        self.cols.apply(&mut t, &|j| (b * xmm(j) + ey) / g.dy_mm);
+        let mut buf = transpose(&t, c, r);
+        // out(u) = P2(u_x + e_x + a (u_y + e_y), u_y)
+        self.rows
+            .apply(&mut buf, &|i| (ex + a * (ymm(i) + ey)) / g.dx_mm);
+        let out = Array2::from_shape_vec((r, c), buf).unwrap_or_else(|_| self.filled.clone());
+        (out, self.mapped_validity(reg))
+    }
+
+    /// Valid where the 4 x 4 neighbourhood of the mapped source point is on the map and valid
+    /// (the rule of the interpolation the result stands in for, so masks do not depend on it).
+    fn mapped_validity(&self, reg: [f64; 3]) -> Array2<bool> {
+        let g = &self.grid;
+        let (cx, cy) = g.centre_mm();
+        let (c, s) = (reg[2].cos(), reg[2].sin());
+        let (r, cc) = (g.rows as isize, g.cols as isize);
+        Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
+            let (x, y) = (g.x_mm(j) - cx, g.y_mm(i) - cy);
+            let (qx, qy) = (c * x - s * y + cx + reg[0], s * x + c * y + cy + reg[1]);
+            let fj = (qx - g.x0_mm) / g.dx_mm;
+            let fi = (qy - g.y0_mm) / g.dy_mm;
+            let (i0, j0) = (fi.floor() as isize, fj.floor() as isize);
+            if i0 < 1 || j0 < 1 || i0 + 2 >= r || j0 + 2 >= cc {
+                return false;
+            }
+            (-1..3).all(|a| (-1..3).all(|b| self.valid[((i0 + a) as usize, (j0 + b) as usize)]))
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(rows: usize, cols: usize, d: f64) -> MapGrid {
+        MapGrid {
+            rows,
+            cols,
+            dx_mm: d,
+            dy_mm: d,
+            x0_mm: 0.0,
+            y0_mm: 0.0,
+        }
+    }
+
+    /// A smooth band-limited test surface, evaluated analytically anywhere.
+    fn f(x: f64, y: f64) -> f64 {
+        5.0 * (0.31 * x + 0.2).sin() + 3.0 * (0.23 * y - 0.4).cos() + 2.0 * (0.17 * (x + y)).sin()
+    }
+
+    #[test]
+    fn matches_the_analytic_transform_inside_the_map() {
+        let g = grid(96, 120, 0.5);
+        let a = Array2::from_shape_fn((g.rows, g.cols), |(i, j)| f(g.x_mm(j), g.y_mm(i)));
+        let v = Array2::from_elem(a.dim(), true);
+        let rs = Resampler::new(&g, &a, &v);
+        let reg = [0.37, -0.61, 0.6f64.to_radians()];
+        let (out, valid) = rs.resample(reg);
+        let (cx, cy) = g.centre_mm();
+        let (c, s) = (reg[2].cos(), reg[2].sin());
+        let mut worst: f64 = 0.0;
+        for i in 15..g.rows - 15 {
+            for j in 15..g.cols - 15 {
+                assert!(valid[(i, j)]);
+                let (x, y) = (g.x_mm(j) - cx, g.y_mm(i) - cy);
+                let want = f(c * x - s * y + cx + reg[0], s * x + c * y + cy + reg[1]);
+                worst = worst.max((out[(i, j)] - want).abs());
+            }
+        }
+        // Signal amplitude ~10: mirrored ends cost a little accuracy far into the interior only.
+        assert!(worst < 0.02, "worst error {worst}");
+    }
+
+    #[test]
+    fn white_noise_variance_does_not_depend_on_the_sub_pixel_shift() {
+        let g = grid(128, 128, 1.0);
+        let mut rng = bonnetlab_surface::rng::Rng::new(3);
+        let a = Array2::from_shape_fn((g.rows, g.cols), |_| rng.normal());
+        let v = Array2::from_elem(a.dim(), true);
+        let rs = Resampler::new(&g, &a, &v);
+        let var = |reg: [f64; 3]| {
+            let (o, _) = rs.resample(reg);
+            let inner: Vec<f64> = o
+                .slice(ndarray::s![16..112, 16..112])
+                .iter()
+                .cloned()
+                .collect();
+            inner.iter().map(|x| x * x).sum::<f64>() / inner.len() as f64
+        };
+        let v0 = var([1e-9, 0.0, 0.0]);
+        let vh = var([0.5, 0.5, 0.0]);
+        // Bicubic would keep 0.41 of it at (0.5, 0.5) px.
+        assert!((vh / v0 - 1.0).abs() < 0.05, "v0 {v0} v(0.5,0.5) {vh}");
+    }
+
+    #[test]
+    fn integer_shift_is_exact_and_gaps_are_invalid() {
+        let g = grid(40, 50, 1.0);
+        let a = Array2::from_shape_fn((g.rows, g.cols), |(i, j)| f(j as f64, i as f64));
+        let mut v = Array2::from_elem(a.dim(), true);
+        v[(20, 25)] = false;
+        let rs = Resampler::new(&g, &a, &v);
+        let (out, valid) = rs.resample([2.0, -3.0, 0.0]);
+        // out(i, j) = a(i - 3, j + 2)
+        assert!((out[(20, 20)] - a[(17, 22)]).abs() < 1e-3);
+        assert!(!valid[(23, 23)], "source (20, 25) is a gap");
+        assert!(valid[(10, 10)]);
+        assert!(!valid[(0, 10)], "maps above the top edge");
+    }
+}
