@@ -33,10 +33,11 @@ fn dwell(c: &mut Criterion) {
         let p = case_problem(name);
         let r = solve_rifta(&p, &RiftaOptions::default()).expect("rifta");
         eprintln!(
-            "{label} rifta: residual {:.4} nm, total {:.1} min, {} passes",
+            "{label} rifta: residual {:.4} nm, total {:.1} min, {} passes, {} FFTs",
             r.residual_rms_nm,
             r.total_dwell_s / 60.0,
-            r.iterations
+            r.iterations,
+            r.fft_count
         );
         g.bench_function(format!("{label}_rifta"), |b| {
             b.iter(|| solve_rifta(&p, &RiftaOptions::default()))
@@ -44,10 +45,11 @@ fn dwell(c: &mut Criterion) {
         let o = IterativeOptions::default();
         let r = solve_iterative(&p, &o).expect("iterative");
         eprintln!(
-            "{label} iterative: residual {:.4} nm, total {:.1} min, {} iterations",
+            "{label} iterative: residual {:.4} nm, total {:.1} min, {} iterations, {} FFTs",
             r.residual_rms_nm,
             r.total_dwell_s / 60.0,
-            r.iterations
+            r.iterations,
+            r.fft_count
         );
         g.bench_function(format!("{label}_iterative"), |b| {
             b.iter(|| solve_iterative(&p, &o))

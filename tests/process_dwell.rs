@@ -68,6 +68,9 @@ fn rifta_reaches_the_targets_on_both_cases() {
             s.residual_rms_nm
         );
         assert!(s.dwell_s.iter().all(|&v| v >= 0.0));
+        // The work is one transform pair per refinement pass plus a fixed seven (kernel
+        // spectrum, level 1, start residual pair, dwell map, evaluation pair).
+        assert_eq!(s.fft_count, 2 * s.iterations + 7, "{name}");
         let check = p.problem.evaluate(&s.dwell_s).unwrap();
         assert!((check.residual_rms_nm - s.residual_rms_nm).abs() < 1e-9);
         if name != "rifta_case_a.toml" {

@@ -5,12 +5,13 @@
 //! `(n1/2 + 1) x n0`, so the column transforms run on contiguous memory; callers only multiply
 //! spectra pointwise, so the layout never leaks. Inverse transforms are normalised (1/(n0 n1)).
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
-use rustfft::num_complex::Complex;
+pub use rustfft::num_complex::Complex;
 use rustfft::{Fft, FftPlanner};
 
 /// Smallest n' >= n whose only prime factors are 2, 3, 5 and 7 (fast FFT sizes).
@@ -39,6 +40,8 @@ pub struct Fft2 {
     c2r: Arc<dyn ComplexToReal<f64>>,
     col_fwd: Arc<dyn Fft<f64>>,
     col_inv: Arc<dyn Fft<f64>>,
+    /// Transforms run so far (forward and inverse), for work counts in solvers and benches.
+    count: AtomicUsize,
 }
 
 impl std::fmt::Debug for Fft2 {
@@ -48,6 +51,11 @@ impl std::fmt::Debug for Fft2 {
 }
 
 const PAR_ROWS: usize = 16;
+
+/// Transforms with fewer real samples than this run on the calling thread: below it, rayon's
+/// hand-offs (six fork-joins per transform pair) cost more than they gain on a shared 2-core
+/// machine (see reports/performance_process.md for the dwell-grid sizes).
+pub const PARALLEL_MIN_LEN: usize = 1 << 18;
 
 impl Fft2 {
     pub fn new(n0: usize, n1: usize) -> Fft2 {
@@ -63,11 +71,22 @@ impl Fft2 {
             c2r: rp.plan_fft_inverse(n1),
             col_fwd: cp.plan_fft_forward(n0),
             col_inv: cp.plan_fft_inverse(n0),
+            count: AtomicUsize::new(0),
         }
+    }
+
+    /// Number of 2-D transforms (forward or inverse) this plan has run.
+    pub fn transforms(&self) -> usize {
+        self.count.load(Ordering::Relaxed)
     }
 
     pub fn shape(&self) -> (usize, usize) {
         (self.n0, self.n1)
+    }
+
+    /// Whether transforms of this size use the rayon pool.
+    pub fn is_parallel(&self) -> bool {
+        self.n0 * self.n1 >= PARALLEL_MIN_LEN
     }
 
     /// Weight of spectrum element `idx` in a Parseval sum over the half spectrum: 1 for the
@@ -90,67 +109,93 @@ impl Fft2 {
     /// Forward transform of `real` (`n0 * n1`, destroyed) into `spec` (transposed half
     /// spectrum); `tmp` is scratch of `spectrum_len()`.
     pub fn forward(&self, real: &mut [f64], tmp: &mut [Complex<f64>], spec: &mut [Complex<f64>]) {
-        let (n1, nh) = (self.n1, self.nh);
-        real.par_chunks_mut(n1 * PAR_ROWS)
-            .zip(tmp.par_chunks_mut(nh * PAR_ROWS))
-            .for_each(|(rin, cout)| {
-                let mut scratch = self.r2c.make_scratch_vec();
-                for (r, c) in rin.chunks_mut(n1).zip(cout.chunks_mut(nh)) {
-                    // Lengths match by construction, so the only error case cannot occur.
-                    let _ = self.r2c.process_with_scratch(r, c, &mut scratch);
-                }
-            });
-        transpose(tmp, spec, self.n0, nh);
-        let n0 = self.n0;
-        spec.par_chunks_mut(n0 * PAR_ROWS).for_each(|chunk| {
+        self.count.fetch_add(1, Ordering::Relaxed);
+        let (n0, n1, nh) = (self.n0, self.n1, self.nh);
+        let rows = |rin: &mut [f64], cout: &mut [Complex<f64>]| {
+            let mut scratch = self.r2c.make_scratch_vec();
+            for (r, c) in rin.chunks_mut(n1).zip(cout.chunks_mut(nh)) {
+                // Lengths match by construction, so the only error case cannot occur.
+                let _ = self.r2c.process_with_scratch(r, c, &mut scratch);
+            }
+        };
+        let cols = |chunk: &mut [Complex<f64>]| {
             let mut scratch = vec![Complex::new(0.0, 0.0); self.col_fwd.get_inplace_scratch_len()];
             self.col_fwd.process_with_scratch(chunk, &mut scratch);
-        });
+        };
+        if self.is_parallel() {
+            real.par_chunks_mut(n1 * PAR_ROWS)
+                .zip(tmp.par_chunks_mut(nh * PAR_ROWS))
+                .for_each(|(rin, cout)| rows(rin, cout));
+            transpose(tmp, spec, n0, nh, true);
+            spec.par_chunks_mut(n0 * PAR_ROWS).for_each(cols);
+        } else {
+            rows(real, tmp);
+            transpose(tmp, spec, n0, nh, false);
+            cols(spec);
+        }
     }
 
     /// Inverse transform of `spec` (destroyed) into `real`, normalised.
     pub fn inverse(&self, spec: &mut [Complex<f64>], tmp: &mut [Complex<f64>], real: &mut [f64]) {
+        self.count.fetch_add(1, Ordering::Relaxed);
         let (n0, n1, nh) = (self.n0, self.n1, self.nh);
-        spec.par_chunks_mut(n0 * PAR_ROWS).for_each(|chunk| {
+        let cols = |chunk: &mut [Complex<f64>]| {
             let mut scratch = vec![Complex::new(0.0, 0.0); self.col_inv.get_inplace_scratch_len()];
             self.col_inv.process_with_scratch(chunk, &mut scratch);
-        });
-        transpose(spec, tmp, nh, n0);
+        };
         let norm = 1.0 / (n0 * n1) as f64;
-        tmp.par_chunks_mut(nh * PAR_ROWS)
-            .zip(real.par_chunks_mut(n1 * PAR_ROWS))
-            .for_each(|(cin, rout)| {
-                let mut scratch = self.c2r.make_scratch_vec();
-                for (c, r) in cin.chunks_mut(nh).zip(rout.chunks_mut(n1)) {
-                    c[0].im = 0.0;
-                    if n1.is_multiple_of(2) {
-                        c[nh - 1].im = 0.0;
-                    }
-                    let _ = self.c2r.process_with_scratch(c, r, &mut scratch);
-                    r.iter_mut().for_each(|v| *v *= norm);
+        let rows = |cin: &mut [Complex<f64>], rout: &mut [f64]| {
+            let mut scratch = self.c2r.make_scratch_vec();
+            for (c, r) in cin.chunks_mut(nh).zip(rout.chunks_mut(n1)) {
+                c[0].im = 0.0;
+                if n1.is_multiple_of(2) {
+                    c[nh - 1].im = 0.0;
                 }
-            });
+                let _ = self.c2r.process_with_scratch(c, r, &mut scratch);
+                r.iter_mut().for_each(|v| *v *= norm);
+            }
+        };
+        if self.is_parallel() {
+            spec.par_chunks_mut(n0 * PAR_ROWS).for_each(cols);
+            transpose(spec, tmp, nh, n0, true);
+            tmp.par_chunks_mut(nh * PAR_ROWS)
+                .zip(real.par_chunks_mut(n1 * PAR_ROWS))
+                .for_each(|(cin, rout)| rows(cin, rout));
+        } else {
+            cols(spec);
+            transpose(spec, tmp, nh, n0, false);
+            rows(tmp, real);
+        }
     }
 }
 
 /// Blocked transpose of an `rows x cols` row-major matrix into `cols x rows`.
-fn transpose(src: &[Complex<f64>], dst: &mut [Complex<f64>], rows: usize, cols: usize) {
+fn transpose(
+    src: &[Complex<f64>],
+    dst: &mut [Complex<f64>],
+    rows: usize,
+    cols: usize,
+    parallel: bool,
+) {
     const B: usize = 32;
-    dst.par_chunks_mut(rows * B)
-        .enumerate()
-        .for_each(|(cb, dchunk)| {
-            let c0 = cb * B;
-            let c1 = (c0 + B).min(cols);
-            for r0 in (0..rows).step_by(B) {
-                let r1 = (r0 + B).min(rows);
-                for c in c0..c1 {
-                    let drow = &mut dchunk[(c - c0) * rows..(c - c0 + 1) * rows];
-                    for r in r0..r1 {
-                        drow[r] = src[r * cols + c];
-                    }
+    let block = |(cb, dchunk): (usize, &mut [Complex<f64>])| {
+        let c0 = cb * B;
+        let c1 = (c0 + B).min(cols);
+        for r0 in (0..rows).step_by(B) {
+            let r1 = (r0 + B).min(rows);
+            for c in c0..c1 {
+                let drow = &mut dchunk[(c - c0) * rows..(c - c0 + 1) * rows];
+                for r in r0..r1 {
+                    drow[r] = src[r * cols + c];
                 }
             }
-        });
+        }
+    };
+    if parallel {
+        dst.par_chunks_mut(rows * B).enumerate().for_each(block);
+    } else {
+        dst.chunks_mut(rows * B).enumerate().for_each(block);
+    }
 }
 
 /// Linear convolution with a fixed kernel by zero-padded FFT (plans, kernel spectrum and
@@ -268,12 +313,14 @@ impl Convolver {
         self.fft
             .forward(&mut self.real, &mut self.tmp, &mut self.spec);
         let kh = &self.kernel_hat;
-        self.spec
-            .par_iter_mut()
-            .zip(kh.par_iter())
-            .for_each(|(s, k)| {
-                *s *= if adjoint { k.conj() } else { *k };
-            });
+        let mul = |(s, k): (&mut Complex<f64>, &Complex<f64>)| {
+            *s *= if adjoint { k.conj() } else { *k };
+        };
+        if self.fft.is_parallel() {
+            self.spec.par_iter_mut().zip(kh.par_iter()).for_each(mul);
+        } else {
+            self.spec.iter_mut().zip(kh.iter()).for_each(mul);
+        }
         self.fft
             .inverse(&mut self.spec, &mut self.tmp, &mut self.real);
         let (or, oc) = out.dim();
@@ -311,10 +358,12 @@ impl Convolver {
         self.fft
             .forward(&mut self.real, &mut self.tmp, &mut self.spec);
         let kh = &self.kernel_hat;
-        self.spec
-            .par_iter_mut()
-            .zip(kh.par_iter())
-            .for_each(|(s, k)| *s *= h(*k));
+        let mul = |(s, k): (&mut Complex<f64>, &Complex<f64>)| *s *= h(*k);
+        if self.fft.is_parallel() {
+            self.spec.par_iter_mut().zip(kh.par_iter()).for_each(mul);
+        } else {
+            self.spec.iter_mut().zip(kh.iter()).for_each(mul);
+        }
         self.fft
             .inverse(&mut self.spec, &mut self.tmp, &mut self.real);
         let mut out = Array2::zeros((self.rows, self.cols));

@@ -66,6 +66,9 @@ pub struct DwellSolution {
     pub total_dwell_s: f64,
     pub method: String,
     pub iterations: usize,
+    /// Real 2-D FFTs of the dwell grid the solve ran (kernel spectrum and final evaluation
+    /// included): the solver's work in units that do not depend on the machine's load.
+    pub fft_count: usize,
     /// Residual vs total dwell for the knob values the solver tried.
     pub trade_off: Vec<TradeOffPoint>,
 }
@@ -234,6 +237,7 @@ pub(crate) fn finish(
         residual_nm: residual,
         method: method.to_string(),
         iterations,
+        fft_count: conv.fft().transforms(),
         trade_off,
     }
 }
