@@ -136,15 +136,21 @@ fn flat_params(effects: &[Box<dyn Effect>], lin: &Linear) -> Vec<f64> {
     v
 }
 
-/// One-sigma uncertainties of every numeric parameter: full Jacobian (linear columns and
+/// One-sigma uncertainties of every numeric parameter: full Jacobian J (linear columns and
 /// forward-difference columns of the non-linear parameters at fixed linear coefficients),
-/// covariance `s^2 (J^T J)^-1` with `s^2 = RSS / (n - p)`, propagated by finite differences.
-/// Assumes independent residuals; spatially correlated residual structure makes them optimistic.
+/// propagated to the reported parameters by finite differences. Two covariances of the fitted
+/// vector are formed and the larger variance kept for each parameter:
+/// - classical `s^2 (J^T J)^-1`, `s^2 = RSS / (n - p)`, right for independent residuals;
+/// - cluster-robust (sandwich) `A^-1 B A^-1`, `A = J^T J`, `B = G / (G - 1) sum_b u_b u_b^T`,
+///   `u_b = J_b^T r_b` summed over the pixels of hold-out block b (G blocks): residual structure
+///   correlated within a block (unmodelled MSF, interpolation error) widens it, where the
+///   classical form would be optimistic.
 fn uncertainties(
     p: &Problem,
     effects: &[Box<dyn Effect>],
     ev: &Eval,
     f: &Fit,
+    blocks: &crate::selection::Split,
 ) -> Result<Vec<f64>, CalibrateError> {
     let lin_cols: Vec<Vec<f64>> = ev
         .cols
@@ -170,6 +176,7 @@ fn uncertainties(
     let cov = crate::lsq::inverse(&jtj)
         .ok_or_else(|| CalibrateError::Processing("singular covariance".into()))?;
     let s2 = f.rss / (f.n - n as f64).max(1.0);
+    let robust = sandwich(&all, &f.resid, &cov, blocks);
     let lin0 = ev.linear(f);
     let base = flat_params(effects, &lin0);
     let theta0: Vec<f64> = effects.iter().flat_map(|e| e.nl()).collect();
@@ -196,15 +203,70 @@ fn uncertainties(
     Ok(grads
         .iter()
         .map(|g| {
-            let mut s = 0.0;
-            for a in 0..n {
-                for b in 0..n {
-                    s += g[a] * cov[a][b] * g[b];
+            let quad = |c: &[Vec<f64>]| {
+                let mut s = 0.0;
+                for a in 0..n {
+                    for b in 0..n {
+                        s += g[a] * c[a][b] * g[b];
+                    }
                 }
-            }
-            (s2 * s).max(0.0).sqrt()
+                s
+            };
+            let classical = s2 * quad(&cov);
+            let clustered = robust.as_deref().map(quad).unwrap_or(0.0);
+            classical.max(clustered).max(0.0).sqrt()
         })
         .collect())
+}
+
+/// Cluster-robust covariance `A^-1 B A^-1` with the hold-out blocks as clusters (see
+/// `uncertainties`); `None` with fewer than 8 populated blocks.
+fn sandwich(
+    cols: &[&[f64]],
+    resid: &[f64],
+    a_inv: &[Vec<f64>],
+    sp: &crate::selection::Split,
+) -> Option<Vec<Vec<f64>>> {
+    let n = cols.len();
+    let mut u = vec![vec![0.0; n]; sp.n_blocks];
+    let mut used = vec![false; sp.n_blocks];
+    for (i, (&b, &r)) in sp.block.iter().zip(resid).enumerate() {
+        if r == 0.0 {
+            continue;
+        }
+        used[b] = true;
+        for (k, c) in cols.iter().enumerate() {
+            u[b][k] += c[i] * r;
+        }
+    }
+    let g = used.iter().filter(|v| **v).count() as f64;
+    if g < 8.0 {
+        return None;
+    }
+    let mut bm = vec![vec![0.0; n]; n];
+    for ub in u.iter().zip(&used).filter(|(_, u)| **u).map(|(v, _)| v) {
+        for a in 0..n {
+            for c in 0..n {
+                bm[a][c] += ub[a] * ub[c];
+            }
+        }
+    }
+    let corr = g / (g - 1.0);
+    let mut t = vec![vec![0.0; n]; n];
+    for a in 0..n {
+        for c in 0..n {
+            t[a][c] = (0..n).map(|k| a_inv[a][k] * bm[k][c]).sum::<f64>() * corr;
+        }
+    }
+    Some(
+        (0..n)
+            .map(|a| {
+                (0..n)
+                    .map(|c| (0..n).map(|k| t[a][k] * a_inv[k][c]).sum())
+                    .collect()
+            })
+            .collect(),
+    )
 }
 
 /// Tie-break order of effect kinds (spec table first).
@@ -265,6 +327,32 @@ fn prune(
     }
 }
 
+/// Which refined contender to accept. The first (in preference order: fewest parameters, the
+/// spec's kinds first) unless another leaves less than half of the excess mean square (above
+/// the noise floor) that the first leaves, and the difference is at least 2 % of the excess
+/// before this round: then the contender leaving the least excess. Nearly collinear
+/// alternatives (a time drift, a rate varying with y and a free time profile on a raster)
+/// keep the preference; a clearly wrong mechanism (a path wiggle standing in for a rate
+/// oscillation) loses to the right one.
+fn settle(rms_before: f64, rms_after: &[f64], noise_rms: f64) -> usize {
+    let n2 = noise_rms * noise_rms;
+    let before = (rms_before * rms_before - n2).max(0.0);
+    let excess: Vec<f64> = rms_after.iter().map(|r| (r * r - n2).max(0.0)).collect();
+    let Some(first) = excess.first().copied() else {
+        return 0;
+    };
+    let (bi, best) =
+        excess.iter().enumerate().fold(
+            (0, first),
+            |acc, (i, &e)| if e < acc.1 { (i, e) } else { acc },
+        );
+    if best < 0.5 * first && first - best > 0.02 * before {
+        bi
+    } else {
+        0
+    }
+}
+
 /// Runs the whole calibration on a prepared problem.
 pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateError> {
     let mut effects: Vec<Box<dyn Effect>> = Vec::new();
@@ -302,6 +390,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         ..Maps::default()
     };
     let sp = split(p);
+    let noise = removal_noise_floor(&p.before, &p.before_valid, &p.after, &p.after_valid);
     let mut rounds = Vec::new();
     let mut accepted: Vec<(String, f64, f64, Score)> = Vec::new(); // key, rms before, rms after, score
     let mut blocked: Vec<String> = Vec::new();
@@ -347,34 +436,61 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             .filter(|s| s.significant())
             .map(|s| s.delta)
             .fold(0.0, f64::max);
-        let best = scores
+        let mut contenders: Vec<usize> = scores
             .iter()
             .enumerate()
             .filter(|(_, s)| s.significant() && s.delta >= 0.9 * top)
-            .min_by(|a, b| {
-                let (ca, cb) = (&cands[a.0], &cands[b.0]);
-                ca.extra
-                    .len()
-                    .cmp(&cb.extra.len())
-                    .then(priority(ca.kind).cmp(&priority(cb.kind)))
-                    .then(b.1.delta.total_cmp(&a.1.delta))
-            })
-            .map(|(i, s)| (i, *s));
-        let Some((bi, score)) = best else {
+            .map(|(i, _)| i)
+            .collect();
+        contenders.sort_by(|&a, &b| {
+            let (ca, cb) = (&cands[a], &cands[b]);
+            ca.extra
+                .len()
+                .cmp(&cb.extra.len())
+                .then(priority(ca.kind).cmp(&priority(cb.kind)))
+                .then(scores[b].delta.total_cmp(&scores[a].delta))
+        });
+        // One contender per kind, at most three: near-ties of different kinds (a slow rate
+        // oscillation vs a path wiggle along y on a raster, which compresses the line spacing)
+        // are settled by refining each and comparing the refined fits (`settle`).
+        let mut kinds = Vec::new();
+        contenders.retain(|&i| {
+            let fresh = !kinds.contains(&cands[i].kind);
+            kinds.push(cands[i].kind);
+            fresh
+        });
+        contenders.truncate(3);
+        if contenders.is_empty() {
             rounds.push(round);
             break;
-        };
-        let cand = &cands[bi];
-        let fc = fit(&ev, &cand.extra)?;
-        let nb = ev.cols.len();
-        let new = (cand.make)(&fc.coef[nb..], fc.coef[0]);
-        let rms_before = f.rms();
-        let mut trial = effects.clone();
-        trial.push(new);
-        let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
-        if trace {
-            eprintln!("[{:?}] refined after {}", t0.elapsed(), cand.key);
         }
+        let rms_before = f.rms();
+        let mut refined = Vec::with_capacity(contenders.len());
+        for &ci in &contenders {
+            let cand = &cands[ci];
+            let fc = fit(&ev, &cand.extra)?;
+            let nb = ev.cols.len();
+            let mut trial = effects.clone();
+            trial.push((cand.make)(&fc.coef[nb..], fc.coef[0]));
+            let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
+            if trace {
+                eprintln!(
+                    "[{:?}] refined after {}: {:.4} nm",
+                    t0.elapsed(),
+                    cand.key,
+                    f_t.rms()
+                );
+            }
+            refined.push((ci, trial, ev_t, f_t));
+        }
+        let pick = settle(
+            rms_before,
+            &refined.iter().map(|r| r.3.rms()).collect::<Vec<_>>(),
+            noise,
+        );
+        let (bi, trial, ev_t, f_t) = refined.swap_remove(pick);
+        let cand = &cands[bi];
+        let score = scores[bi];
         if f_t.rms() >= rms_before {
             blocked.push(cand.key.clone());
             rounds.push(round);
@@ -402,7 +518,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     let sig = if effects.is_empty() {
         Vec::new()
     } else {
-        uncertainties(p, &effects, &ev, &f).unwrap_or_default()
+        uncertainties(p, &effects, &ev, &f, &sp).unwrap_or_default()
     };
     let mut k = 0;
     let mut reports = Vec::new();
@@ -440,7 +556,6 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             heldout_reduction_fraction: score.fraction,
         });
     }
-    let noise = removal_noise_floor(&p.before, &p.before_valid, &p.after, &p.after_valid);
     let (rmap, rmask) = p.expand(&f.resid, &ev.w);
     let unexplained = unexplained::find(&p.grid, &rmap, &rmask, noise, f.rms());
     maps.final_residual_nm = Some((rmap, rmask));
