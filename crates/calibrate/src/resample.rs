@@ -142,8 +142,8 @@ fn fill_gaps(a: &Array2<f64>, valid: &Array2<bool>) -> Array2<f64> {
     }
     if let Some(first) = has.iter().position(|h| *h) {
         let mut src = first;
-        for i in 0..r {
-            if has[i] {
+        for (i, &h) in has.iter().enumerate() {
+            if h {
                 src = i;
             } else {
                 let row = out.row(src).to_owned();
