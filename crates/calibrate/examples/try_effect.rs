@@ -1,5 +1,8 @@
 //! Developer probe: generate a run with one injected effect (by name) and calibrate it.
-//! `cargo run -p bonnetlab-calibrate --example try_effect -- drift`
+//! `cargo run --release -p bonnetlab-calibrate --example try_effect -- drift [N]`
+//! N: an N x N map of a 100 mm part (default: the 160 x 180 test run). Environment: SEED,
+//! NOISE (nm), APERTURE (disc diameter, mm), BONNETLAB_TRACE (timings per round). Prints the
+//! effects found, each round's best candidates and the timings to stderr, the JSON to stdout.
 use bonnetlab_calibrate::model::Problem;
 use bonnetlab_calibrate::run::{calibrate, Options};
 use bonnetlab_calibrate::synth::{generate, Injected, SynthConfig, Waveform, WiggleCoord};
@@ -35,6 +38,17 @@ fn main() {
             amplitude_fraction: 0.15,
             period_s: 300.0,
         }],
+        "noise" => vec![],
+        "bench" => vec![
+            Injected::RateDrift {
+                fraction_per_run: -0.2,
+            },
+            Injected::Registration {
+                dx_mm: 0.2,
+                dy_mm: -0.15,
+                rotation_deg: 0.05,
+            },
+        ],
         "step" => vec![Injected::RateStep {
             at_tau: 0.4,
             fraction: 0.2,
@@ -69,11 +83,22 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(11);
-    let cfg = SynthConfig {
+    let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
+    let mut cfg = SynthConfig {
         effects: eff,
         seed,
+        aperture_diameter_mm: env("APERTURE"),
         ..SynthConfig::default()
     };
+    if let Some(n) = env("NOISE") {
+        cfg.noise_nm = n;
+    }
+    if let Some(n) = std::env::args()
+        .nth(2)
+        .and_then(|s| s.parse::<usize>().ok())
+    {
+        (cfg.rows, cfg.cols, cfg.pixel_mm, cfg.deposit_step_mm) = (n, n, 100.0 / n as f64, 0.2);
+    }
     let t = std::time::Instant::now();
     let run = generate(&cfg).unwrap();
     eprintln!(
@@ -87,5 +112,30 @@ fn main() {
     let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();
     let c = calibrate(&p, &Options::default()).unwrap();
     eprintln!("calibrate {:?}", t.elapsed());
+    eprintln!(
+        "baseline {:.4} nm, final {:.4} nm, noise floor {:.4} nm",
+        c.baseline.residual_rms_nm, c.final_.residual_rms_nm, c.noise_floor_rms_nm
+    );
+    for e in &c.effects {
+        eprintln!(
+            "{} {:?} +- {:?} z {:.1}",
+            e.kind, e.params, e.uncertainties, e.significance
+        );
+    }
+    for (k, r) in c.rounds.iter().enumerate() {
+        let mut cands = r.candidates.clone();
+        cands.sort_by(|a, b| b.z.total_cmp(&a.z));
+        let top: Vec<String> = cands
+            .iter()
+            .take(5)
+            .map(|c| {
+                format!(
+                    "{} z {:.1} f {:.3}",
+                    c.key, c.z, c.heldout_reduction_fraction
+                )
+            })
+            .collect();
+        eprintln!("round {k} accepted {:?}: {}", r.accepted, top.join(" | "));
+    }
     println!("{}", serde_json::to_string_pretty(&c).unwrap());
 }

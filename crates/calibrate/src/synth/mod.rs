@@ -129,6 +129,9 @@ pub struct SynthConfig {
     /// Set-up tilt of the after map (nm across the map) and piston (nm).
     pub setup_tilt_nm: f64,
     pub setup_piston_nm: f64,
+    /// Clear aperture: a disc of this diameter (mm) about the map centre; pixels outside it
+    /// are invalid in both maps (a round part). `None`: the whole map is the part.
+    pub aperture_diameter_mm: Option<f64>,
     pub effects: Vec<Injected>,
 }
 
@@ -153,6 +156,7 @@ impl Default for SynthConfig {
             dropout_fraction: 0.003,
             setup_tilt_nm: 15.0,
             setup_piston_nm: 7.0,
+            aperture_diameter_mm: None,
             effects: Vec::new(),
         }
     }
@@ -493,6 +497,16 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
             for i in ci.saturating_sub(2)..(ci + 3).min(cfg.rows) {
                 for j in cj.saturating_sub(2)..(cj + 3).min(cfg.cols) {
                     valid[(i, j)] = false;
+                }
+            }
+        }
+    }
+    if let Some(dia) = cfg.aperture_diameter_mm {
+        let r2 = 0.25 * dia * dia;
+        for v in [&mut vb, &mut va] {
+            for ((i, j), ok) in v.indexed_iter_mut() {
+                if (grid.x_mm(j) - cx).powi(2) + (grid.y_mm(i) - cy).powi(2) > r2 {
+                    *ok = false;
                 }
             }
         }
