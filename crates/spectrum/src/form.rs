@@ -8,12 +8,13 @@
 //! `remove_terms` (built for 37 Zernike terms) takes about a second. Any other term list goes
 //! to `bonnetlab_surface::remove_terms`. Both paths are tested to agree.
 
-use ndarray::{Array2, Axis};
+use ndarray::Array2;
 use rayon::prelude::*;
 
 use bonnetlab_surface::{remove_terms, Surface, SurfaceError, Term};
 
 use crate::error::SpectrumError;
+use crate::scan::{HeightSums, MaskSummary};
 
 /// Rows per band of the parallel reduction: fixed, so the sum order is thread-independent.
 const BAND_ROWS: usize = 64;
@@ -64,12 +65,12 @@ impl PlaneModel {
         out
     }
 
-    fn v_of(&self, i: usize) -> f64 {
+    pub fn v_of(&self, i: usize) -> f64 {
         (i as f64 * self.sy - self.cy) / self.half
     }
 
     /// The model along row i as q0 + q1 u + q2 u^2.
-    fn row_poly(&self, i: usize) -> [f64; 3] {
+    pub fn row_poly(&self, i: usize) -> [f64; 3] {
         let b = self.basis_poly(self.v_of(i));
         let mut q = [0.0; 3];
         for (c, bk) in self.coef.iter().zip(&b).take(self.n_basis()) {
@@ -78,6 +79,37 @@ impl PlaneModel {
             }
         }
         q
+    }
+
+    /// Coefficients of 1, u, v and u^2 + v^2 (0 for terms not fitted).
+    fn plain_coefficients(&self) -> [f64; 4] {
+        let mut c = [0.0; 4];
+        let mut k = 0;
+        if self.piston {
+            c[0] = self.coef[k];
+            k += 1;
+        }
+        if self.tilt {
+            c[1] = self.coef[k];
+            c[2] = self.coef[k + 1];
+            k += 2;
+        }
+        if self.power {
+            c[3] = self.coef[k];
+        }
+        c
+    }
+
+    /// The model along column j as p0 + p1 v + p2 v^2.
+    pub fn col_poly(&self, j: usize) -> [f64; 3] {
+        let [c0, cu, cv, cp] = self.plain_coefficients();
+        let u = self.us.get(j).copied().unwrap_or(0.0);
+        [c0 + cu * u + cp * u * u, cv, cp]
+    }
+
+    /// Normalised x coordinate u of every column.
+    pub fn us(&self) -> &[f64] {
+        &self.us
     }
 
     /// Writes the model along row i into `out` (one value per column).
@@ -94,21 +126,35 @@ impl PlaneModel {
     }
 }
 
+/// True when `terms` is a non-empty list of piston / tilt / power only.
+fn low_order(terms: &[Term]) -> bool {
+    !terms.is_empty()
+        && terms
+            .iter()
+            .all(|t| matches!(t, Term::Piston | Term::Tilt | Term::Power))
+}
+
 /// Fits piston / tilt / power jointly; `None` when `terms` holds anything else (or nothing).
 pub(crate) fn fit_plane_model(
     s: &Surface,
     terms: &[Term],
 ) -> Result<Option<PlaneModel>, SpectrumError> {
-    if terms.is_empty()
-        || !terms
-            .iter()
-            .all(|t| matches!(t, Term::Piston | Term::Tilt | Term::Power))
-    {
+    if !low_order(terms) {
         return Ok(None);
     }
+    let mask = MaskSummary::of(s.valid().view());
+    Ok(Some(fit_with_scan(s, terms, &mask)?.0))
+}
+
+/// The joint fit from one pass over the heights (`HeightSums`), which it also returns.
+fn fit_with_scan(
+    s: &Surface,
+    terms: &[Term],
+    mask: &MaskSummary,
+) -> Result<(PlaneModel, HeightSums), SpectrumError> {
     let sx = s.dx_mm.unwrap_or(1.0);
     let sy = s.dy_mm.unwrap_or(1.0);
-    let Some((r0, r1, c0, c1)) = bounding_box(s) else {
+    let Some((r0, r1, c0, c1)) = mask.bounding_box() else {
         return Err(SurfaceError::NoValidPixel.into());
     };
     let cx = 0.5 * (c0 + c1) as f64 * sx;
@@ -132,8 +178,8 @@ pub(crate) fn fit_plane_model(
         half,
         residual_mean: 0.0,
     };
+    let sums = HeightSums::of(s.heights_nm().view(), &m.us);
     let nb = m.n_basis();
-    let u2: Vec<f64> = m.us.iter().map(|u| u * u).collect();
     let mut full_moments = [0.0; 5];
     for &u in &m.us {
         let mut p = 1.0;
@@ -142,9 +188,9 @@ pub(crate) fn fit_plane_model(
             p *= u;
         }
     }
-    let h = s.heights_nm();
     let valid = s.valid();
     let model = &m;
+    let sums_ref = &sums;
     // Per band: A^T A (4 x 4, full), A^T z, sum of each basis, sum z, count.
     type Acc = ([f64; 16], [f64; 4], [f64; 4], f64, f64);
     let partial: Vec<Acc> = (0..rows.div_ceil(BAND_ROWS))
@@ -152,19 +198,14 @@ pub(crate) fn fit_plane_model(
         .map(|b| {
             let mut acc: Acc = ([0.0; 16], [0.0; 4], [0.0; 4], 0.0, 0.0);
             for i in b * BAND_ROWS..((b + 1) * BAND_ROWS).min(rows) {
-                let (hz, hv) = (h.row(i), valid.row(i));
-                // Invalid pixels store 0, so the z moments need no mask.
-                let (mut z0, mut z1, mut z2) = (0.0, 0.0, 0.0);
-                for ((&z, &u), &uu) in hz.iter().zip(&model.us).zip(&u2) {
-                    z0 += z;
-                    z1 += z * u;
-                    z2 += z * uu;
+                if mask.row_valid[i] == 0 {
+                    continue;
                 }
-                let mm = if hv.iter().all(|&v| v) {
+                let mm = if mask.row_full(i) {
                     full_moments
                 } else {
                     let mut mm = [0.0; 5];
-                    for (&ok, &u) in hv.iter().zip(&model.us) {
+                    for (&ok, &u) in valid.row(i).iter().zip(&model.us) {
                         if ok {
                             let uu = u * u;
                             mm[0] += 1.0;
@@ -176,10 +217,7 @@ pub(crate) fn fit_plane_model(
                     }
                     mm
                 };
-                if mm[0] == 0.0 {
-                    continue;
-                }
-                let zm = [z0, z1, z2];
+                let zm = sums_ref.row[i];
                 let bp = model.basis_poly(model.v_of(i));
                 for k in 0..nb {
                     for a in 0..3 {
@@ -195,7 +233,7 @@ pub(crate) fn fit_plane_model(
                         }
                     }
                 }
-                acc.3 += z0;
+                acc.3 += zm[0];
                 acc.4 += mm[0];
             }
             acc
@@ -223,7 +261,7 @@ pub(crate) fn fit_plane_model(
     }
     m.coef = solve_spd(&mut t.0, &mut t.1, nb)?;
     m.residual_mean = (t.3 - (0..nb).map(|k| m.coef[k] * t.2[k]).sum::<f64>()) / t.4;
-    Ok(Some(m))
+    Ok((m, sums))
 }
 
 /// The surface with `terms` removed jointly (its `removed` list extended). Piston / tilt /
@@ -255,35 +293,50 @@ pub fn remove_form(s: &Surface, terms: &[Term]) -> Result<Surface, SpectrumError
 }
 
 /// A surface ready for line analyses: either the original with a model to subtract on the
-/// fly, or a residual computed by `remove_terms`.
+/// fly, or a residual computed by `remove_terms`; with the mask summary and height sums of
+/// `surface` (as stored, before any model is subtracted).
 pub(crate) struct Prepared<'a> {
     pub surface: std::borrow::Cow<'a, Surface>,
     pub model: Option<PlaneModel>,
     pub removed: Vec<Term>,
+    pub mask: MaskSummary,
+    pub sums: HeightSums,
+    /// Mean of the residual (surface minus model) over the valid pixels, nm.
+    pub mean_nm: f64,
 }
 
 pub(crate) fn prepare<'a>(s: &'a Surface, terms: &[Term]) -> Result<Prepared<'a>, SpectrumError> {
     use std::borrow::Cow;
     let removed = with_removed_list(&s.removed, terms);
-    if let Some(m) = fit_plane_model(s, terms)? {
+    let mask = MaskSummary::of(s.valid().view());
+    if mask.valid_count() == 0 {
+        return Err(SurfaceError::NoValidPixel.into());
+    }
+    if low_order(terms) {
+        let (m, sums) = fit_with_scan(s, terms, &mask)?;
         return Ok(Prepared {
             surface: Cow::Borrowed(s),
+            mean_nm: m.residual_mean,
             model: Some(m),
             removed,
+            mask,
+            sums,
         });
-    }
-    if s.valid_count() == 0 {
-        return Err(SurfaceError::NoValidPixel.into());
     }
     let surface = if terms.is_empty() {
         Cow::Borrowed(s)
     } else {
         Cow::Owned(remove_terms(s, terms)?.0)
     };
+    let sums = HeightSums::of(surface.heights_nm().view(), &[]);
+    let mean_nm = sums.row.iter().map(|r| r[0]).sum::<f64>() / mask.valid_count() as f64;
     Ok(Prepared {
         surface,
         model: None,
         removed,
+        mask,
+        sums,
+        mean_nm,
     })
 }
 
@@ -305,21 +358,6 @@ pub(crate) fn with_removed(mut r: Surface, terms: &[Term]) -> Surface {
         }
     }
     r
-}
-
-fn bounding_box(s: &Surface) -> Option<(usize, usize, usize, usize)> {
-    let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0usize, usize::MAX, 0usize);
-    for (i, row) in s.valid().axis_iter(Axis(0)).enumerate() {
-        let first = row.iter().position(|&v| v);
-        let last = row.iter().rposition(|&v| v);
-        if let (Some(a), Some(b)) = (first, last) {
-            r0 = r0.min(i);
-            r1 = r1.max(i);
-            c0 = c0.min(a);
-            c1 = c1.max(b);
-        }
-    }
-    (r0 != usize::MAX).then_some((r0, r1, c0, c1))
 }
 
 /// Cholesky solve of the packed upper-triangular 4 x 4 normal equations (size n).

@@ -12,6 +12,7 @@
 
 pub mod band;
 pub mod convert;
+mod dense;
 pub mod error;
 pub mod form;
 pub mod limit;
@@ -19,6 +20,7 @@ mod lines;
 pub mod psd1d;
 pub mod psd2d;
 pub mod ripple;
+mod scan;
 pub mod window;
 
 pub use band::{band, band_power, band_rms, BandRms, MSF_DEFAULT_PER_MM};
@@ -27,7 +29,9 @@ pub use error::SpectrumError;
 pub use form::remove_form;
 pub use limit::{check_limit, LimitCheck, LimitLine};
 pub use lines::{Axis, Detrend};
-pub use psd1d::{band_rms_profile, line_psd, psd_x, psd_xy, psd_y, Psd1d, PsdOptions};
+pub use psd1d::{
+    band_rms_profile, line_psd, psd_x, psd_xy, psd_y, stats_psd_xy, Psd1d, PsdOptions,
+};
 pub use psd2d::{psd_2d, Psd2d, RadialPsd};
 pub use ripple::{
     ripple, ripple_from_psds, Harmonic, Ripple, RippleOptions, PROMINENCE_THRESHOLD_DB,

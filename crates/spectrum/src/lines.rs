@@ -83,7 +83,7 @@ pub(crate) struct LineSums {
 }
 
 impl LineSums {
-    fn new(nbins: usize) -> Self {
+    pub fn new(nbins: usize) -> Self {
         LineSums {
             power: vec![0.0; nbins],
             weight: 0.0,
@@ -91,7 +91,21 @@ impl LineSums {
             n_segments: 0,
         }
     }
-    fn add(&mut self, o: &LineSums) {
+    /// Adds `count` full lines of N = `n` samples whose |Z_k|^2 sum to `power_sum`, all with
+    /// the full window of energy `energy` (one scaling per chunk instead of per line).
+    pub fn add_full_lines(&mut self, power_sum: &[f64], count: usize, n: usize, energy: f64) {
+        if count == 0 {
+            return;
+        }
+        let scale = if energy > 0.0 { n as f64 / energy } else { 0.0 };
+        for (a, p) in self.power.iter_mut().zip(power_sum) {
+            *a += p * scale;
+        }
+        self.weight += (n * count) as f64;
+        self.n_lines += count;
+        self.n_segments += count;
+    }
+    pub fn add(&mut self, o: &LineSums) {
         for (a, b) in self.power.iter_mut().zip(&o.power) {
             *a += b;
         }
@@ -133,6 +147,32 @@ impl LineWorker {
             z: vec![0.0; n],
             ok: vec![false; n],
         }
+    }
+
+    /// Fills the FFT input with `fill` (a full line, already detrended and windowed), transforms
+    /// it and adds |Z_k|^2 to `acc` (N/2 + 1 bins). The dense fast path of `dense`.
+    pub fn add_power_with(&mut self, fill: impl FnOnce(&mut [f64]), acc: &mut [f64]) {
+        fill(&mut self.input);
+        let mut input = std::mem::take(&mut self.input);
+        self.add_power_of(&mut input, acc);
+        self.input = input;
+    }
+
+    /// Transforms `input` (a full, detrended and windowed line of N samples; overwritten) and
+    /// adds |Z_k|^2 to `acc` (N/2 + 1 bins).
+    pub fn add_power_of(&mut self, input: &mut [f64], acc: &mut [f64]) {
+        // Lengths match by construction (N-sample lines, plan buffers), so this cannot fail.
+        let _ = self
+            .plan
+            .process_with_scratch(input, &mut self.spectrum, &mut self.scratch);
+        for (a, c) in acc.iter_mut().zip(&self.spectrum) {
+            *a += c.re * c.re + c.im * c.im;
+        }
+    }
+
+    /// Window energy sum(w^2) of a full line.
+    pub fn full_energy(&self) -> f64 {
+        self.full_energy
     }
 
     /// Adds one line's segments to `acc` (`acc.power` has N/2 + 1 bins).
@@ -286,7 +326,9 @@ pub(crate) fn fill_short_gaps(z: &mut [f64], ok: &mut [bool], max_gap: usize) {
     }
 }
 
-/// Sums the segment periodograms of all lines of `heights` along `axis`.
+/// Sums the segment periodograms of all lines of `heights` along `axis`: the reference (one
+/// general path for every line) that the dense passes of `dense` are tested against.
+#[cfg(test)]
 pub(crate) fn sum_lines(
     heights: ArrayView2<f64>,
     valid: ArrayView2<bool>,

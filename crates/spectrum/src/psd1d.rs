@@ -7,12 +7,13 @@
 //! `lines`). Global form removal (`PsdOptions::remove`) runs once before any line is cut.
 //! The lowest `biased_bins` bins are biased low by the detrending and should not be read.
 
-use bonnetlab_surface::{Surface, Term};
+use bonnetlab_surface::{HeightStats, Surface, Term};
 use serde::Serialize;
 
+use crate::dense::{sum_cols, sum_rows, MapView, StatsAcc};
 use crate::error::SpectrumError;
-use crate::form::{prepare, PlaneModel};
-use crate::lines::{map_lines, sum_lines, Axis, Detrend, LineRules, LineSums};
+use crate::form::{prepare, Prepared};
+use crate::lines::{map_lines, Axis, Detrend, LineRules, LineSums};
 use crate::window::Window;
 
 /// Options shared by every PSD in this crate.
@@ -163,32 +164,63 @@ fn finish(
 
 /// PSD along `axis` of a surface whose form has already been removed (no removal here).
 pub fn line_psd(s: &Surface, axis: Axis, opts: &PsdOptions) -> Result<Psd1d, SpectrumError> {
-    along(s, None, axis, opts, s.removed.clone())
+    geometry(s, axis)?;
+    let p = prepare(s, &[])?;
+    Ok(along(&p, axis, opts, false)?.0)
+}
+
+/// The line sums of a prepared map along `axis` (with the residual's height moments when
+/// `stats` and `axis` is X).
+fn line_sums(
+    p: &Prepared,
+    axis: Axis,
+    rules: LineRules,
+    stats: bool,
+) -> (LineSums, Option<StatsAcc>) {
+    // Standard layout is what every reader produces; anything else is copied once here.
+    let hc = p.surface.heights_nm().as_standard_layout();
+    let vc = p.surface.valid().as_standard_layout();
+    let (rows, cols) = p.surface.dim();
+    let (Some(heights), Some(valid)) = (hc.as_slice(), vc.as_slice()) else {
+        unreachable!("a standard-layout array is contiguous");
+    };
+    let map = MapView {
+        heights,
+        valid,
+        rows,
+        cols,
+        model: p.model.as_ref(),
+        mask: &p.mask,
+        sums: &p.sums,
+    };
+    match axis {
+        Axis::X => sum_rows(&map, rules, stats.then_some(p.mean_nm)),
+        Axis::Y => (sum_cols(&map, rules), None),
+    }
 }
 
 fn along(
-    s: &Surface,
-    model: Option<&PlaneModel>,
+    p: &Prepared,
     axis: Axis,
     opts: &PsdOptions,
-    removed: Vec<Term>,
-) -> Result<Psd1d, SpectrumError> {
-    let (d, n) = geometry(s, axis)?;
+    stats: bool,
+) -> Result<(Psd1d, Option<StatsAcc>), SpectrumError> {
+    let (d, n) = geometry(&p.surface, axis)?;
     let rules = opts.rules(n)?;
-    let sums = sum_lines(s.heights_nm().view(), s.valid().view(), axis, rules, model);
+    let (sums, st) = line_sums(p, axis, rules, stats);
     if sums.n_segments == 0 {
         return Err(SpectrumError::NoUsableLine {
             axis: axis.name(),
             min_len: rules.min_len,
         });
     }
-    Ok(finish(&sums, n, d, axis, opts, removed))
+    Ok((finish(&sums, n, d, axis, opts, p.removed.clone()), st))
 }
 
 fn prepared_along(s: &Surface, axis: Axis, opts: &PsdOptions) -> Result<Psd1d, SpectrumError> {
     geometry(s, axis)?;
     let p = prepare(s, &opts.remove)?;
-    along(&p.surface, p.model.as_ref(), axis, opts, p.removed)
+    Ok(along(&p, axis, opts, false)?.0)
 }
 
 /// One-sided PSD along X (each row a line), nm^2 mm.
@@ -205,15 +237,27 @@ pub fn psd_y(s: &Surface, opts: &PsdOptions) -> Result<Psd1d, SpectrumError> {
 pub fn psd_xy(s: &Surface, opts: &PsdOptions) -> Result<(Psd1d, Psd1d), SpectrumError> {
     s.pixel_mm("a PSD")?;
     let p = prepare(s, &opts.remove)?;
-    let x = along(
-        &p.surface,
-        p.model.as_ref(),
-        Axis::X,
-        opts,
-        p.removed.clone(),
-    )?;
-    let y = along(&p.surface, p.model.as_ref(), Axis::Y, opts, p.removed)?;
+    let x = along(&p, Axis::X, opts, false)?.0;
+    let y = along(&p, Axis::Y, opts, false)?.0;
     Ok((x, y))
+}
+
+/// Height parameters of the map after `opts.remove` (the same numbers as
+/// `bonnetlab_surface::height_stats` of the residual) together with both PSDs: the metrology
+/// of one map with one form fit and no residual map. The statistics are gathered while the X
+/// lines are read, so they cost no pass of their own.
+pub fn stats_psd_xy(
+    s: &Surface,
+    opts: &PsdOptions,
+) -> Result<(HeightStats, Psd1d, Psd1d), SpectrumError> {
+    s.pixel_mm("a PSD")?;
+    let p = prepare(s, &opts.remove)?;
+    let (x, st) = along(&p, Axis::X, opts, true)?;
+    let stats = st
+        .and_then(|a| a.finish(p.mean_nm))
+        .ok_or(bonnetlab_surface::SurfaceError::NoValidPixel)?;
+    let y = along(&p, Axis::Y, opts, false)?.0;
+    Ok((stats, x, y))
 }
 
 /// Band RMS in [f1, f2] mm^-1 of every line along `axis` (rows for X, columns for Y), from
