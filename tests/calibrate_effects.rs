@@ -9,12 +9,15 @@ use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig, Waveform, Wig
 use bonnetlab::calibrate::tif::TifMap;
 
 fn run(effects: Vec<Injected>, seed: u64) -> Calibration {
-    let cfg = SynthConfig {
+    run_cfg(&SynthConfig {
         effects,
         seed,
         ..SynthConfig::default()
-    };
-    let run = generate(&cfg).unwrap();
+    })
+}
+
+fn run_cfg(cfg: &SynthConfig) -> Calibration {
+    let run = generate(cfg).unwrap();
     let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).unwrap();
     let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();
     calibrate(&p, &Options::default()).unwrap()
@@ -107,10 +110,7 @@ fn registration_is_unbiased_on_fine_pixels() {
         }],
         ..SynthConfig::default()
     };
-    let run = generate(&cfg).unwrap();
-    let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).unwrap();
-    let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();
-    let c = calibrate(&p, &Options::default()).unwrap();
+    let c = run_cfg(&cfg);
     assert_eq!(c.effects.len(), 1, "{}", summary(&c));
     for (param, want) in [("dx_mm", 0.2), ("dy_mm", -0.15), ("rotation_deg", 0.05)] {
         let got = num(&c, "registration", param);

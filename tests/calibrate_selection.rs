@@ -8,12 +8,15 @@ use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig, Waveform, Wig
 use bonnetlab::calibrate::tif::TifMap;
 
 fn run(effects: Vec<Injected>, seed: u64) -> Calibration {
-    let cfg = SynthConfig {
+    run_cfg(&SynthConfig {
         effects,
         seed,
         ..SynthConfig::default()
-    };
-    let run = generate(&cfg).unwrap();
+    })
+}
+
+fn run_cfg(cfg: &SynthConfig) -> Calibration {
+    let run = generate(cfg).unwrap();
     let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).unwrap();
     let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();
     calibrate(&p, &Options::default()).unwrap()
@@ -159,10 +162,7 @@ fn slow_rate_oscillation_beats_a_path_wiggle_on_a_large_part() {
         }],
         ..SynthConfig::default()
     };
-    let run = generate(&cfg).unwrap();
-    let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).unwrap();
-    let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();
-    let c = calibrate(&p, &Options::default()).unwrap();
+    let c = run_cfg(&cfg);
     assert_eq!(c.effects.len(), 1, "{}", summary(&c));
     assert_eq!(c.effects[0].kind, "rate_oscillation", "{}", summary(&c));
     let period = c.effects[0].params["period_s"].as_f64().unwrap();
