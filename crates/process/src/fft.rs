@@ -246,17 +246,9 @@ impl Convolver {
         let n0 = n0.max(rows).max(1);
         let n1 = n1.max(cols).max(1);
         let fft = Fft2::new(n0, n1);
-        let mut real = vec![0.0; n0 * n1];
-        let (k0, k1) = kernel.dim();
-        let (c0, c1) = (k0 / 2, k1 / 2);
-        for ((a, b), &v) in kernel.indexed_iter() {
-            let i = (a as isize - c0 as isize).rem_euclid(n0 as isize) as usize;
-            let j = (b as isize - c1 as isize).rem_euclid(n1 as isize) as usize;
-            real[i * n1 + j] += v;
-        }
-        let mut tmp = vec![Complex::new(0.0, 0.0); fft.spectrum_len()];
-        let mut kernel_hat = tmp.clone();
-        fft.forward(&mut real, &mut tmp, &mut kernel_hat);
+        let kernel_hat = kernel_hat(&fft, kernel);
+        let real = vec![0.0; n0 * n1];
+        let tmp = vec![Complex::new(0.0, 0.0); fft.spectrum_len()];
         let spec = tmp.clone();
         Convolver {
             fft,
@@ -376,6 +368,137 @@ impl Convolver {
     }
 }
 
+/// The half spectrum of `kernel` placed with its centre pixel `(k0 / 2, k1 / 2)` at the origin
+/// (wrapped), for a transform of `fft`'s size.
+fn kernel_hat(fft: &Fft2, kernel: ArrayView2<f64>) -> Vec<Complex<f64>> {
+    let (n0, n1) = fft.shape();
+    let mut real = vec![0.0; n0 * n1];
+    let (k0, k1) = kernel.dim();
+    let (c0, c1) = (k0 / 2, k1 / 2);
+    for ((a, b), &v) in kernel.indexed_iter() {
+        let i = (a as isize - c0 as isize).rem_euclid(n0 as isize) as usize;
+        let j = (b as isize - c1 as isize).rem_euclid(n1 as isize) as usize;
+        real[i * n1 + j] += v;
+    }
+    let mut tmp = vec![Complex::new(0.0, 0.0); fft.spectrum_len()];
+    let mut hat = tmp.clone();
+    fft.forward(&mut real, &mut tmp, &mut hat);
+    hat
+}
+
+/// A sum of linear convolutions, each input with its own kernel, through one inverse transform
+/// (plans, kernel spectra and buffers reused across calls). Same conventions as [`Convolver`]
+/// ("same" mode, kernel centre at `(k0 / 2, k1 / 2)`); the transform size is given, and outputs
+/// farther than the largest kernel half-width from the input border are exact for any size at
+/// least the input's.
+pub struct MultiConvolver {
+    fft: Fft2,
+    rows: usize,
+    cols: usize,
+    kernel_hats: Vec<Vec<Complex<f64>>>,
+    real: Vec<f64>,
+    tmp: Vec<Complex<f64>>,
+    spec: Vec<Complex<f64>>,
+    acc: Vec<Complex<f64>>,
+}
+
+impl std::fmt::Debug for MultiConvolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "MultiConvolver({} kernels, {} x {} via {:?})",
+            self.kernel_hats.len(),
+            self.rows,
+            self.cols,
+            self.fft
+        )
+    }
+}
+
+impl MultiConvolver {
+    pub fn with_fft_size(
+        rows: usize,
+        cols: usize,
+        kernels: &[ArrayView2<f64>],
+        n0: usize,
+        n1: usize,
+    ) -> MultiConvolver {
+        let fft = Fft2::new(n0.max(rows).max(1), n1.max(cols).max(1));
+        let kernel_hats = kernels.iter().map(|k| kernel_hat(&fft, k.view())).collect();
+        let (n0, n1) = fft.shape();
+        let len = fft.spectrum_len();
+        let zero = Complex::new(0.0, 0.0);
+        MultiConvolver {
+            fft,
+            rows,
+            cols,
+            kernel_hats,
+            real: vec![0.0; n0 * n1],
+            tmp: vec![zero; len],
+            spec: vec![zero; len],
+            acc: vec![zero; len],
+        }
+    }
+
+    /// The transform (its [`Fft2::transforms`] counts the work done).
+    pub fn fft(&self) -> &Fft2 {
+        &self.fft
+    }
+
+    /// `sum_k inputs[k] * kernels[k]` on the input shape; `None` inputs (no dwell of that kind)
+    /// cost nothing. Inputs beyond the number of kernels are ignored.
+    pub fn apply_sum(&mut self, inputs: &[Option<ArrayView2<f64>>]) -> Array2<f64> {
+        let n1 = self.fft.shape().1;
+        let parallel = self.fft.is_parallel();
+        let mut any = false;
+        for (input, kh) in inputs.iter().zip(&self.kernel_hats) {
+            let Some(input) = input else { continue };
+            let (r, c) = (self.rows.min(input.nrows()), self.cols.min(input.ncols()));
+            self.real.iter_mut().for_each(|v| *v = 0.0);
+            for i in 0..r {
+                for (d, s) in self.real[i * n1..i * n1 + c]
+                    .iter_mut()
+                    .zip(input.row(i).iter())
+                {
+                    *d = *s;
+                }
+            }
+            self.fft
+                .forward(&mut self.real, &mut self.tmp, &mut self.spec);
+            let first = !any;
+            let mac = |((a, s), k): ((&mut Complex<f64>, &Complex<f64>), &Complex<f64>)| {
+                *a = if first { s * k } else { *a + s * k };
+            };
+            if parallel {
+                self.acc
+                    .par_iter_mut()
+                    .zip(self.spec.par_iter())
+                    .zip(kh.par_iter())
+                    .for_each(mac);
+            } else {
+                self.acc
+                    .iter_mut()
+                    .zip(self.spec.iter())
+                    .zip(kh.iter())
+                    .for_each(mac);
+            }
+            any = true;
+        }
+        let mut out = Array2::zeros((self.rows, self.cols));
+        if !any {
+            return out;
+        }
+        self.fft
+            .inverse(&mut self.acc, &mut self.tmp, &mut self.real);
+        for i in 0..self.rows {
+            for (d, s) in out.row_mut(i).iter_mut().zip(self.real[i * n1..].iter()) {
+                *d = *s;
+            }
+        }
+        out
+    }
+}
+
 /// Direct "same"-mode convolution (brute force; the reference in tests).
 pub fn convolve_direct(input: ArrayView2<f64>, kernel: ArrayView2<f64>) -> Array2<f64> {
     let (r, c) = input.dim();
@@ -428,6 +551,25 @@ mod tests {
             let err = (&fast - &slow).iter().fold(0.0f64, |m, v| m.max(v.abs()));
             assert!(err < 1e-10, "max error {err}");
         }
+    }
+
+    #[test]
+    fn multi_convolver_sums_direct_convolutions() {
+        let (r, c) = (21, 18);
+        let (x, y) = (random(r, c, 6), random(r, c, 7));
+        let (k, l) = (random(5, 3, 8), random(3, 7, 9));
+        let mut m = MultiConvolver::with_fft_size(r, c, &[k.view(), l.view()], r + 7, c + 7);
+        let got = m.apply_sum(&[Some(x.view()), Some(y.view())]);
+        let want = convolve_direct(x.view(), k.view()) + convolve_direct(y.view(), l.view());
+        let err = (&got - &want).iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        assert!(err < 1e-10, "{err}");
+        let only_y = m.apply_sum(&[None, Some(y.view())]);
+        let want_y = convolve_direct(y.view(), l.view());
+        assert!((&only_y - &want_y).iter().all(|v| v.abs() < 1e-10));
+        // Two kernel spectra and one input: one forward and one inverse more.
+        let before = m.fft().transforms();
+        let _ = m.apply_sum(&[None, Some(y.view())]);
+        assert_eq!(m.fft().transforms() - before, 2);
     }
 
     #[test]

@@ -2,8 +2,9 @@
 //! predicted after map (after = before - removal, on the before map's valid pixels).
 //!
 //! The TIF comes from a recipe's `[tif]`: a measured spot (resampled to the map pitch) or a
-//! model, sampled with anti-aliased edges for the fast path and evaluated analytically by the
-//! exact deposition.
+//! model. The fast path builds its kernels from the model itself (point values for a resting
+//! tool, one-pixel averages along the motion for a moving one); exact deposition evaluates the
+//! model analytically. `sampled()` (anti-aliased for hard edges) is the TIF shown in reports.
 
 use bonnetlab_surface::Surface;
 use ndarray::Array2;
@@ -78,6 +79,18 @@ impl ToolModel {
         }
     }
 
+    /// The fast-removal workspace on `grid`: a model's motion kernels come from the model
+    /// itself (exact point values and one-pixel averages, see [`crate::tif::motion`]), a
+    /// measured TIF's from its bilinear interpolant; either way they match what exact
+    /// deposition evaluates.
+    pub fn fast_removal(&self, grid: &Grid) -> Result<FastRemoval, ProcessError> {
+        match self {
+            ToolModel::Sampled(t) => FastRemoval::new(t, grid),
+            ToolModel::Gaussian(_, g) => FastRemoval::from_field(g, grid),
+            ToolModel::Bonnet(_, b) => FastRemoval::from_field(b.as_ref(), grid),
+        }
+    }
+
     /// The continuous field (analytic for models, bilinear for a measured TIF).
     pub fn field(&self) -> &dyn RateField {
         match self {
@@ -106,7 +119,7 @@ pub fn removal(
     mode: Mode,
 ) -> Result<Array2<f64>, ProcessError> {
     match mode {
-        Mode::Fast => FastRemoval::new(tool.sampled(), grid)?.removal(path, weights),
+        Mode::Fast => tool.fast_removal(grid)?.removal(path, weights),
         Mode::Exact => deposit_exact(path, tool.field(), grid, weights, &ExactOptions::default()),
     }
 }

@@ -12,6 +12,7 @@
 pub mod bonnet;
 pub mod gaussian;
 pub mod measured;
+pub mod motion;
 
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
