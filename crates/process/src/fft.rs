@@ -445,6 +445,21 @@ impl MultiConvolver {
         &self.fft
     }
 
+    /// Adds a kernel (one forward transform); returns its index for [`Self::apply_sum`].
+    pub fn push_kernel(&mut self, kernel: ArrayView2<f64>) -> usize {
+        self.kernel_hats.push(kernel_hat(&self.fft, kernel));
+        self.kernel_hats.len() - 1
+    }
+
+    /// Keeps only the first `n` kernels (drops cached ones).
+    pub fn truncate_kernels(&mut self, n: usize) {
+        self.kernel_hats.truncate(n);
+    }
+
+    pub fn kernel_count(&self) -> usize {
+        self.kernel_hats.len()
+    }
+
     /// `sum_k inputs[k] * kernels[k]` on the input shape; `None` inputs (no dwell of that kind)
     /// cost nothing. Inputs beyond the number of kernels are ignored.
     pub fn apply_sum(&mut self, inputs: &[Option<ArrayView2<f64>>]) -> Array2<f64> {

@@ -257,7 +257,13 @@ impl Tif {
 }
 
 impl RateField for Tif {
+    /// Bilinear inside the sampled window, 0 beyond its outer samples (the half-extent), on
+    /// every side alike.
     fn rate_at_mm(&self, dx_mm: f64, dy_mm: f64) -> f64 {
+        let (ex, ey) = self.half_extent_mm();
+        if dx_mm.abs() > ex * (1.0 + 1e-12) || dy_mm.abs() > ey * (1.0 + 1e-12) {
+            return 0.0;
+        }
         self.value_at_mm(dx_mm, dy_mm)
     }
 
