@@ -9,8 +9,9 @@ use bonnetlab::process::dwell::{
     solve_iterative, solve_rifta, DwellCase, IterativeOptions, RiftaOptions,
 };
 use bonnetlab::process::path::kinematics::{dwell_raster, Limits};
+use bonnetlab::process::tif::bonnet::BonnetTif;
 use bonnetlab::process::tif::BonnetTifParams;
-use bonnetlab::process::{FastRemoval, Grid, RasterSpec, Tif};
+use bonnetlab::process::{FastRemoval, Grid, RasterSpec};
 use criterion::{criterion_group, criterion_main, Criterion};
 use ndarray::Array2;
 
@@ -60,9 +61,9 @@ fn dwell(c: &mut Criterion) {
 
 /// A 100 x 100 mm part at 0.1 mm pixels, the paper's bonnet, a raster at 3 mm pitch whose feed
 /// realises a smooth dwell map, stretched to 60 minutes.
-fn run_60_min() -> (Grid, Tif, bonnetlab::process::PathLog) {
+fn run_60_min() -> (Grid, BonnetTif, bonnetlab::process::PathLog) {
     let grid = Grid::new(1000, 1000, 0.1, 0.1, 0.0, 0.0).expect("grid");
-    let tif = Tif::bonnet(&BonnetTifParams::paper(20.0), 0.1, 0.1).expect("tif");
+    let tif = BonnetTif::new(&BonnetTifParams::paper(20.0)).expect("tif");
     let dgrid = Grid::new(120, 120, 1.0, 1.0, -10.0, -10.0).expect("grid");
     // 60 min over ~3600 mm of lines at 3 mm pitch: ~0.33 s/mm^2 on average, +-30 %.
     let dens = Array2::from_shape_fn((120, 120), |(i, j)| {
@@ -85,10 +86,23 @@ fn removal(c: &mut Criterion) {
     );
     let mut g = c.benchmark_group("removal");
     g.sample_size(10).measurement_time(Duration::from_secs(10));
+    // As `simulate` does: kernels from the model (point, along-X / along-Y pixel averages, one
+    // along-X kernel per raster line phase).
     g.bench_function("fast_100mm_0.1mm_60min_with_setup", |b| {
-        b.iter(|| FastRemoval::new(&tif, &grid).and_then(|mut f| f.removal(&path, None)))
+        b.iter(|| FastRemoval::from_field(&tif, &grid).and_then(|mut f| f.removal(&path, None)))
     });
-    let mut fast = FastRemoval::new(&tif, &grid).expect("workspace");
+    let mut fast = FastRemoval::from_field(&tif, &grid).expect("workspace");
+    let _ = fast.removal(&path, None).expect("removal");
+    eprintln!(
+        "fast removal: {} FFTs for setup and first path, {} per further path",
+        fast.fft_count(),
+        {
+            let b = fast.fft_count();
+            let _ = fast.removal(&path, None).expect("removal");
+            fast.fft_count() - b
+        }
+    );
+
     g.bench_function("fast_100mm_0.1mm_60min_reused", |b| {
         b.iter(|| fast.removal(&path, None))
     });
