@@ -30,12 +30,12 @@ use crate::scan::{HeightSums, MaskSummary};
 /// Rows per chunk of the X pass.
 const ROW_CHUNK: usize = 32;
 /// Columns gathered together in the Y pass (16 x 8 bytes: two cache lines of every row).
-const COL_BLOCK: usize = 32;
+const COL_BLOCK: usize = 64;
 /// Padding of the Y buffers' stride, in f64 (one cache line).
 const STRIDE_PAD: usize = 8;
 
 /// Rows ahead of the Y gather whose block segments are prefetched.
-const PREFETCH_ROWS: usize = 8;
+const PREFETCH_ROWS: usize = 16;
 
 /// Hints the CPU to start loading the cache line of `data[k]` (nothing when k is out of range
 /// or the target has no prefetch instruction).
@@ -267,15 +267,37 @@ pub(crate) fn sum_rows(
 
 /// input[j] = (z[j] - (a + b u_j + c u_j^2)) w[j], with a holding the model's constant and the
 /// line mean.
-fn fill_row(input: &mut [f64], z: &[f64], us: &[f64], w: &[f64], [a, b, c]: [f64; 3]) {
+fn fill_row(input: &mut [f64], z: &[f64], us: &[f64], w: &[f64], abc: [f64; 3]) {
+    avx2_or_baseline!(fill_row_impl(input, z, us, w, abc))
+}
+
+#[inline(always)]
+fn fill_row_impl(input: &mut [f64], z: &[f64], us: &[f64], w: &[f64], [a, b, c]: [f64; 3]) {
     for (((o, &zj), &u), &wj) in input.iter_mut().zip(z).zip(us).zip(w) {
         *o = (zj - (a + u * (b + c * u))) * wj;
     }
 }
 
 /// As `fill_row`, also pushing every residual r = z - model into the moments about `mu`.
+/// The moments live in local four-lane arrays (registers) for the row and are added to `st`
+/// once; min / max are plain comparisons (heights are finite, no NaN handling needed).
 #[allow(clippy::too_many_arguments)]
 fn fill_row_with_stats(
+    input: &mut [f64],
+    z: &[f64],
+    us: &[f64],
+    w: &[f64],
+    q: [f64; 3],
+    mean: f64,
+    mu: f64,
+    st: &mut StatsAcc,
+) {
+    avx2_or_baseline!(fill_row_with_stats_impl(input, z, us, w, q, mean, mu, st))
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn fill_row_with_stats_impl(
     input: &mut [f64],
     z: &[f64],
     us: &[f64],
@@ -285,6 +307,14 @@ fn fill_row_with_stats(
     mu: f64,
     st: &mut StatsAcc,
 ) {
+    let (mut s1, mut s2, mut s3, mut s4, mut sa) = (
+        [0.0f64; 4],
+        [0.0f64; 4],
+        [0.0f64; 4],
+        [0.0f64; 4],
+        [0.0f64; 4],
+    );
+    let (mut lo, mut hi) = (st.lo, st.hi);
     let n4 = z.len() / 4 * 4;
     for (((oc, zc), uc), wc) in input[..n4]
         .chunks_exact_mut(4)
@@ -295,10 +325,27 @@ fn fill_row_with_stats(
         for l in 0..4 {
             let u = uc[l];
             let r = zc[l] - (q0 + u * (q1 + q2 * u));
-            st.push(l, r - mu);
             oc[l] = (r - mean) * wc[l];
+            let d = r - mu;
+            let d2 = d * d;
+            s1[l] += d;
+            s2[l] += d2;
+            s3[l] += d2 * d;
+            s4[l] += d2 * d2;
+            sa[l] += d.abs();
+            lo[l] = if d < lo[l] { d } else { lo[l] };
+            hi[l] = if d > hi[l] { d } else { hi[l] };
         }
     }
+    for l in 0..4 {
+        st.s1[l] += s1[l];
+        st.s2[l] += s2[l];
+        st.s3[l] += s3[l];
+        st.s4[l] += s4[l];
+        st.sa[l] += sa[l];
+    }
+    st.lo = lo;
+    st.hi = hi;
     for k in n4..z.len() {
         let u = us[k];
         let r = z[k] - (q0 + u * (q1 + q2 * u));
@@ -306,6 +353,59 @@ fn fill_row_with_stats(
         input[k] = (r - mean) * w[k];
     }
     st.count += z.len();
+}
+
+/// Copies z - g(v_i) of columns j0..j0 + cnt of the row-major map (`cols` wide) into `buf`,
+/// column c at `c * stride`. Four rows are read together so that every buffer receives four
+/// adjacent values at a time. Each row read starts a new page, which the hardware prefetchers
+/// do not follow: rows `PREFETCH_ROWS` ahead are requested explicitly.
+fn gather_block(
+    heights: &[f64],
+    cols: usize,
+    j0: usize,
+    cnt: usize,
+    g: &[f64],
+    buf: &mut [f64],
+    stride: usize,
+) {
+    avx2_or_baseline!(gather_block_impl(heights, cols, j0, cnt, g, buf, stride))
+}
+
+#[inline(always)]
+fn gather_block_impl(
+    heights: &[f64],
+    cols: usize,
+    j0: usize,
+    cnt: usize,
+    g: &[f64],
+    buf: &mut [f64],
+    stride: usize,
+) {
+    let n = g.len();
+    let n4 = n / 4 * 4;
+    let seg = |i: usize| &heights[i * cols + j0..i * cols + j0 + cnt];
+    for i in (0..n4).step_by(4) {
+        for t in 0..4 {
+            let ahead = (i + t + PREFETCH_ROWS) * cols + j0;
+            for off in (0..cnt).step_by(8) {
+                prefetch(heights, ahead + off);
+            }
+        }
+        let (r0, r1, r2, r3) = (seg(i), seg(i + 1), seg(i + 2), seg(i + 3));
+        let (g0, g1, g2, g3) = (g[i], g[i + 1], g[i + 2], g[i + 3]);
+        for (c, dst) in buf.chunks_exact_mut(stride).take(cnt).enumerate() {
+            let d = &mut dst[i..i + 4];
+            d[0] = r0[c] - g0;
+            d[1] = r1[c] - g1;
+            d[2] = r2[c] - g2;
+            d[3] = r3[c] - g3;
+        }
+    }
+    for i in n4..n {
+        for (dst, &z) in buf.chunks_exact_mut(stride).zip(seg(i)) {
+            dst[i] = z - g[i];
+        }
+    }
 }
 
 /// Sums the segment periodograms of all columns (Y lines).
@@ -350,18 +450,7 @@ pub(crate) fn sum_cols(map: &MapView, rules: LineRules) -> LineSums {
             |(worker, full_power, buf, vcol), &b| {
                 let j0 = b * COL_BLOCK;
                 let cnt = COL_BLOCK.min(cols - j0);
-                // Gather z - g(v) of the block's columns. Every row read starts a new page,
-                // which the hardware prefetchers do not follow: ask for rows ahead explicitly.
-                for (i, &gi) in g.iter().enumerate() {
-                    let ahead = (i + PREFETCH_ROWS) * cols + j0;
-                    for off in (0..cnt).step_by(8) {
-                        prefetch(map.heights, ahead + off);
-                    }
-                    let zr = &map.heights[i * cols + j0..i * cols + j0 + cnt];
-                    for (c, &z) in zr.iter().enumerate() {
-                        buf[c * stride + i] = z - gi;
-                    }
-                }
+                gather_block(map.heights, cols, j0, cnt, &g, buf, stride);
                 let mut acc = LineSums::new(nbins);
                 full_power.fill(0.0);
                 let mut full = 0;

@@ -11,6 +11,8 @@
 //! job; results do not depend on the thread count.
 
 pub mod band;
+#[macro_use]
+mod simd;
 pub mod convert;
 mod dense;
 pub mod error;

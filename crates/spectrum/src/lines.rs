@@ -165,9 +165,7 @@ impl LineWorker {
         let _ = self
             .plan
             .process_with_scratch(input, &mut self.spectrum, &mut self.scratch);
-        for (a, c) in acc.iter_mut().zip(&self.spectrum) {
-            *a += c.re * c.re + c.im * c.im;
-        }
+        add_norm_sqr(acc, &self.spectrum);
     }
 
     /// Window energy sum(w^2) of a full line.
@@ -269,6 +267,18 @@ impl LineWorker {
         power.clear();
         let inv = if energy > 0.0 { 1.0 / energy } else { 0.0 };
         power.extend(self.spectrum.iter().map(|c| c.norm_sqr() * inv));
+    }
+}
+
+/// acc[k] += |z[k]|^2.
+fn add_norm_sqr(acc: &mut [f64], z: &[Complex<f64>]) {
+    avx2_or_baseline!(add_norm_sqr_impl(acc, z))
+}
+
+#[inline(always)]
+fn add_norm_sqr_impl(acc: &mut [f64], z: &[Complex<f64>]) {
+    for (a, c) in acc.iter_mut().zip(z) {
+        *a += c.re * c.re + c.im * c.im;
     }
 }
 

@@ -166,6 +166,11 @@ impl HeightSums {
 
 /// sum z of one row, adding the row into the column sums (four lanes, as `row_moments`).
 fn row_sum(z: &[f64], col: &mut [f64]) -> f64 {
+    avx2_or_baseline!(row_sum_impl(z, col))
+}
+
+#[inline(always)]
+fn row_sum_impl(z: &[f64], col: &mut [f64]) -> f64 {
     let mut s = [0.0f64; 4];
     let n4 = z.len() / 4 * 4;
     for (zc, cc) in z[..n4].chunks_exact(4).zip(col[..n4].chunks_exact_mut(4)) {
@@ -185,6 +190,11 @@ fn row_sum(z: &[f64], col: &mut [f64]) -> f64 {
 /// sum z, sum z u, sum z u^2 of one row, adding the row into the column sums. Four
 /// independent partial sums per moment let the compiler keep them in vector registers.
 fn row_moments(z: &[f64], us: &[f64], u2: &[f64], col: &mut [f64]) -> [f64; 3] {
+    avx2_or_baseline!(row_moments_impl(z, us, u2, col))
+}
+
+#[inline(always)]
+fn row_moments_impl(z: &[f64], us: &[f64], u2: &[f64], col: &mut [f64]) -> [f64; 3] {
     let (mut s0, mut s1, mut s2) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
     let n4 = z.len() / 4 * 4;
     for (((zc, uc), vc), cc) in z[..n4]
