@@ -92,9 +92,11 @@ fn finds_registration() {
 
 /// On fine pixels (0.25 mm, 100 mm part) with 0.3 nm noise, a short interpolation kernel pulls
 /// the registration towards half-pixel offsets (bicubic gave 0.148 mm for 0.2 mm and 0.023 deg
-/// for 0.05 deg here); the band-limited resampler must not. Tighter than the 20 % criterion:
-/// within 5 %, and no other effect may ride along (a biased registration used to leave a
-/// residual that a spurious periodic path error at the raster pitch absorbed).
+/// for 0.05 deg here), and finite-difference Jacobians of the noisy map stall Gauss-Newton;
+/// the band-limited resampler and the denoised Jacobian must not. Within 3 % (the criterion is
+/// 20 %; measured 0.2002, -0.1489, 0.0504), and no other effect may ride along (a biased
+/// registration used to leave a residual that a spurious periodic path error at the raster
+/// pitch absorbed).
 #[test]
 fn registration_is_unbiased_on_fine_pixels() {
     let cfg = SynthConfig {
@@ -114,7 +116,7 @@ fn registration_is_unbiased_on_fine_pixels() {
     assert_eq!(c.effects.len(), 1, "{}", summary(&c));
     for (param, want) in [("dx_mm", 0.2), ("dy_mm", -0.15), ("rotation_deg", 0.05)] {
         let got = num(&c, "registration", param);
-        assert!(within(got, want, 0.05), "{param} {got}: {}", summary(&c));
+        assert!(within(got, want, 0.03), "{param} {got}: {}", summary(&c));
     }
     check_final(&c);
 }

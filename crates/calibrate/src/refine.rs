@@ -37,7 +37,27 @@ pub fn jacobian(
 ) -> Result<Vec<Vec<f64>>, CalibrateError> {
     let (theta, steps) = nl_vec(effects);
     let mut cols = Vec::with_capacity(theta.len());
+    // Registration parameters: analytic columns from the smoothed after map (see
+    // `effects::registration`), profiled by projecting out the linear columns.
+    let mut analytic: Vec<Option<Vec<f64>>> = vec![None; theta.len()];
+    let mut k = 0;
+    for e in effects {
+        let n = e.nl().len();
+        if e.registration().is_some() && n == 3 {
+            for (o, c) in crate::effects::registration::jacobian(p, ev0)
+                .into_iter()
+                .enumerate()
+            {
+                analytic[k + o] = Some(if profiled { project_out(ev0, &c)? } else { c });
+            }
+        }
+        k += n;
+    }
     for i in 0..theta.len() {
+        if let Some(c) = analytic[i].take() {
+            cols.push(c);
+            continue;
+        }
         let mut t = theta.clone();
         t[i] += steps[i];
         let mut trial: Vec<Box<dyn Effect>> = effects.to_vec();
@@ -69,6 +89,23 @@ pub fn jacobian(
         );
     }
     Ok(cols)
+}
+
+/// `c` minus its weighted least-squares fit by the evaluation's linear columns.
+fn project_out(ev: &Eval, c: &[f64]) -> Result<Vec<f64>, CalibrateError> {
+    let cols: Vec<&[f64]> = ev.cols.iter().map(|v| v.as_slice()).collect();
+    let (g, r) = crate::lsq::gram(&cols, c, &ev.w, None);
+    let coef = crate::lsq::solve(&g, &r)
+        .ok_or_else(|| CalibrateError::Processing("singular projection".into()))?;
+    let mut out = c.to_vec();
+    for (a, col) in coef.iter().zip(&cols) {
+        for ((o, v), w) in out.iter_mut().zip(col.iter()).zip(&ev.w) {
+            if *w != 0.0 {
+                *o -= a * v;
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// Refines the non-linear parameters in place; returns the final evaluation and fit.

@@ -30,28 +30,51 @@ use crate::grid::MapGrid;
 /// Line shifter for one line length (plans shared between threads).
 struct LineShift {
     n: usize,
+    /// Odd FFT length >= 2 n: no Nyquist bin, so the phase ramp is exactly unitary (an even
+    /// length's Nyquist bin can only be scaled by cos(pi s) and loses 1 / (2n) of white-noise
+    /// power at half a pixel, enough to bias a registration on 800 x 800 maps).
+    len: usize,
     r2c: Arc<dyn RealToComplex<f64>>,
     c2r: Arc<dyn ComplexToReal<f64>>,
 }
 
+/// Smallest odd m >= n whose prime factors are 3, 5 and 7 only.
+fn odd_fast_len(n: usize) -> usize {
+    let mut m = n.max(1) | 1;
+    loop {
+        let mut k = m;
+        for p in [3, 5, 7] {
+            while k.is_multiple_of(p) {
+                k /= p;
+            }
+        }
+        if k == 1 {
+            return m;
+        }
+        m += 2;
+    }
+}
+
 impl LineShift {
     fn new(n: usize) -> Self {
+        let len = odd_fast_len(2 * n);
         let mut p = RealFftPlanner::<f64>::new();
         LineShift {
             n,
-            r2c: p.plan_fft_forward(2 * n),
-            c2r: p.plan_fft_inverse(2 * n),
+            len,
+            r2c: p.plan_fft_forward(len),
+            c2r: p.plan_fft_inverse(len),
         }
     }
 
     /// Shifts every line of `lines` (rows of a row-major buffer of `n` columns) in place:
-    /// `line[j] <- f(j + shift(line index))`, f the band-limited interpolant of the mirrored line.
+    /// `line[j] <- f(j + shift(line index))`, f the band-limited interpolant of the extended line.
     fn apply(&self, lines: &mut [f64], shift: &(dyn Fn(usize) -> f64 + Sync)) {
         let n = self.n;
         lines.par_chunks_mut(n).enumerate().for_each_init(
             || {
                 (
-                    vec![0.0; 2 * n],
+                    vec![0.0; self.len],
                     self.r2c.make_output_vec(),
                     self.r2c.make_scratch_vec(),
                     self.c2r.make_scratch_vec(),
@@ -62,26 +85,22 @@ impl LineShift {
                 if s == 0.0 {
                     return;
                 }
+                // Mirror, then hold the first value until the period closes: continuous at
+                // both joins.
                 buf[..n].copy_from_slice(line);
                 for j in 0..n {
                     buf[2 * n - 1 - j] = line[j];
                 }
+                buf[2 * n..].fill(line[0]);
                 if self.r2c.process_with_scratch(buf, spec, s1).is_err() {
                     return;
                 }
-                let m = 2 * n;
+                let m = self.len;
                 let step = 2.0 * std::f64::consts::PI * s / m as f64;
                 let rot = Complex64::new(step.cos(), step.sin());
                 let mut ph = Complex64::new(1.0, 0.0);
-                let last = spec.len() - 1;
                 for (k, v) in spec.iter_mut().enumerate() {
-                    if k == last {
-                        // Nyquist of an even-length real signal: only its real part survives.
-                        let c = (step * k as f64).cos();
-                        *v = Complex64::new(v.re * c, 0.0);
-                    } else {
-                        *v *= ph;
-                    }
+                    *v *= ph;
                     ph *= rot;
                     if k % 64 == 63 {
                         // Re-anchor the recurrence against rounding drift.
@@ -294,7 +313,7 @@ mod tests {
         let v0 = var([1e-9, 0.0, 0.0]);
         let vh = var([0.5, 0.5, 0.0]);
         // Bicubic would keep 0.41 of it at (0.5, 0.5) px.
-        assert!((vh / v0 - 1.0).abs() < 0.05, "v0 {v0} v(0.5,0.5) {vh}");
+        assert!((vh / v0 - 1.0).abs() < 0.01, "v0 {v0} v(0.5,0.5) {vh}");
     }
 
     #[test]

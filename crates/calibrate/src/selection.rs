@@ -47,11 +47,17 @@ pub fn split(p: &Problem) -> Split {
     }
 }
 
-/// Gram matrices of the current columns on each half (reused for every candidate of a round).
+/// Per-round state shared by every candidate: the current columns' Gram matrices on each
+/// half, the base model's coefficients fitted on each half and its residuals on the other.
 pub struct BaseGram {
     g: [Vec<Vec<f64>>; 2],
     r: [Vec<f64>; 2],
-    sel: [Vec<bool>; 2],
+    /// Weighted selection of each half (w where the pixel is in the half, else 0).
+    ws: [Vec<f64>; 2],
+    /// Base coefficients fitted on half `fold`.
+    cb: [Option<Vec<f64>>; 2],
+    /// Residual `m - base prediction(fitted on fold)` on the pixels of the other half (0 else).
+    eb: [Vec<f64>; 2],
 }
 
 pub fn base_gram(ev: &Eval, sp: &Split) -> BaseGram {
@@ -60,11 +66,43 @@ pub fn base_gram(ev: &Eval, sp: &Split) -> BaseGram {
     let sb: Vec<bool> = sp.half_a.iter().map(|v| !v).collect();
     let (ga, ra) = lsq::gram(&cols, &ev.m, &ev.w, Some(&sa));
     let (gb, rb) = lsq::gram(&cols, &ev.m, &ev.w, Some(&sb));
+    let ws = |sel: &[bool]| -> Vec<f64> {
+        sel.iter()
+            .zip(&ev.w)
+            .map(|(s, w)| if *s { *w } else { 0.0 })
+            .collect()
+    };
+    let ws = [ws(&sa), ws(&sb)];
+    let cb = [lsq::solve(&ga, &ra), lsq::solve(&gb, &rb)];
+    let eb = [0, 1].map(|fold| match &cb[fold] {
+        Some(c) => residual_on(&ev.m, &cols, c, &ws[1 - fold]),
+        None => vec![0.0; ev.m.len()],
+    });
     BaseGram {
         g: [ga, gb],
         r: [ra, rb],
-        sel: [sa, sb],
+        ws,
+        cb,
+        eb,
     }
+}
+
+/// `m - sum_a coef_a col_a` where `on` is non-zero, 0 elsewhere (column by column, so the
+/// inner loops run over contiguous pixels).
+fn residual_on(m: &[f64], cols: &[&[f64]], coef: &[f64], on: &[f64]) -> Vec<f64> {
+    let mut e: Vec<f64> = m
+        .iter()
+        .zip(on)
+        .map(|(v, o)| if *o != 0.0 { *v } else { 0.0 })
+        .collect();
+    for (c, col) in coef.iter().zip(cols) {
+        for ((ei, ci), o) in e.iter_mut().zip(col.iter()).zip(on) {
+            if *o != 0.0 {
+                *ei -= c * ci;
+            }
+        }
+    }
+    e
 }
 
 #[derive(Debug, Clone, Copy, Default)]
@@ -81,14 +119,8 @@ impl Score {
     }
 }
 
-fn dot_sel(a: &[f64], b: &[f64], w: &[f64], sel: &[bool]) -> f64 {
-    let mut s = 0.0;
-    for i in 0..a.len() {
-        if sel[i] {
-            s += w[i] * a[i] * b[i];
-        }
-    }
-    s
+fn dot_w(a: &[f64], b: &[f64], ws: &[f64]) -> f64 {
+    a.iter().zip(b).zip(ws).map(|((x, y), w)| w * x * y).sum()
 }
 
 /// Two-fold held-out score of adding `extra` columns to the current model.
@@ -100,7 +132,7 @@ pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Scor
     let mut d = vec![0.0; sp.n_blocks];
     let mut sse_base = 0.0;
     for fold in 0..2 {
-        let sel = &bg.sel[fold];
+        let ws = &bg.ws[fold];
         // Full Gram = base + cross terms with the extra columns.
         let n = nb + ne;
         let mut g = vec![vec![0.0; n]; n];
@@ -111,39 +143,41 @@ pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Scor
         }
         for e in 0..ne {
             for a in 0..nb {
-                let v = dot_sel(&extra[e], &ev.cols[a], &ev.w, sel);
+                let v = dot_w(&extra[e], &ev.cols[a], ws);
                 g[nb + e][a] = v;
                 g[a][nb + e] = v;
             }
             for f in e..ne {
-                let v = dot_sel(&extra[e], &extra[f], &ev.w, sel);
+                let v = dot_w(&extra[e], &extra[f], ws);
                 g[nb + e][nb + f] = v;
                 g[nb + f][nb + e] = v;
             }
-            r[nb + e] = dot_sel(&extra[e], &ev.m, &ev.w, sel);
+            r[nb + e] = dot_w(&extra[e], &ev.m, ws);
         }
-        let base_g: Vec<Vec<f64>> = g[..nb].iter().map(|row| row[..nb].to_vec()).collect();
-        let (Some(cb), Some(cf)) = (lsq::solve(&base_g, &r[..nb]), lsq::solve(&g, &r)) else {
+        let (Some(cb), Some(cf)) = (&bg.cb[fold], lsq::solve(&g, &r)) else {
             return Score::default();
         };
-        // Score on the other half.
-        let test = &bg.sel[1 - fold];
-        for i in 0..ev.m.len() {
-            if !test[i] || ev.w[i] == 0.0 {
-                continue;
+        // Score on the other half: ef = eb - sum_a (cf_a - cb_a) col_a - sum_e cf_e extra_e.
+        let test = &bg.ws[1 - fold];
+        let eb = &bg.eb[fold];
+        let mut ef = eb.clone();
+        let cols = ev
+            .cols
+            .iter()
+            .zip(cf[..nb].iter().zip(cb).map(|(f, b)| f - b))
+            .chain(extra.iter().zip(cf[nb..].iter().copied()));
+        for (col, c) in cols {
+            for ((e, v), t) in ef.iter_mut().zip(col).zip(test) {
+                if *t != 0.0 {
+                    *e -= c * v;
+                }
             }
-            let pb: f64 = cb.iter().zip(&ev.cols).map(|(c, col)| c * col[i]).sum();
-            let mut pf: f64 = cf[..nb]
-                .iter()
-                .zip(&ev.cols)
-                .map(|(c, col)| c * col[i])
-                .sum();
-            for e in 0..ne {
-                pf += cf[nb + e] * extra[e][i];
+        }
+        for (i, t) in test.iter().enumerate() {
+            if *t != 0.0 {
+                d[sp.block[i]] += eb[i] * eb[i] - ef[i] * ef[i];
+                sse_base += eb[i] * eb[i];
             }
-            let (eb, ef) = (ev.m[i] - pb, ev.m[i] - pf);
-            d[sp.block[i]] += eb * eb - ef * ef;
-            sse_base += eb * eb;
         }
     }
     let used: Vec<f64> = d.iter().cloned().filter(|v| *v != 0.0).collect();
