@@ -233,19 +233,28 @@ fn splat_cubic_row(d: &mut Array2<f64>, i: isize, v: f64, w: f64) {
     }
 }
 
-/// Sub-row phases are compared at this resolution (rows / 2^20): path positions that should
-/// share a line agree far better, and a shift of 2^-20 row is far below any effect.
-const PHASE_STEPS: f64 = (1u32 << 20) as f64;
+/// Sub-row phases of along-X dwell are histogrammed in 1 / 4096 row; a run of occupied bins
+/// is one line phase (a logged path's lines wander by a little), given a kernel at its
+/// dwell-weighted mean phase. Phases are keyed in 1 / 2^20 row.
+const PHASE_BINS: usize = 4096;
+const PHASE_KEY_STEPS: f64 = (1u32 << 20) as f64;
+/// Widest run of bins taken as one line phase (1/32 row).
+const MAX_PHASE_SPAN_BINS: usize = PHASE_BINS / 32;
 
-/// Row and quantised sub-row phase (in 1 / [`PHASE_STEPS`]) of fractional row `u`.
-fn row_phase(u: f64) -> (isize, u32) {
+/// Row and sub-row phase (0 <= phase < 1) of fractional row `u`, and the phase's histogram bin.
+fn row_phase(u: f64) -> (isize, f64, usize) {
     let n = u.floor();
-    let q = ((u - n) * PHASE_STEPS).round();
-    if q >= PHASE_STEPS {
-        (n as isize + 1, 0)
-    } else {
-        (n as isize, q as u32)
-    }
+    let f = (u - n).clamp(0.0, 1.0);
+    let b = ((f * PHASE_BINS as f64) as usize).min(PHASE_BINS - 1);
+    (n as isize, f, b)
+}
+
+/// Line phases of a path's along-X dwell: the kernel-phase of each histogram bin's run.
+struct LinePhases {
+    /// Cluster index of each bin (`u8::MAX`: empty).
+    bin_cluster: Vec<u8>,
+    /// Dwell-weighted mean phase of each cluster.
+    phase: Vec<f64>,
 }
 
 /// Most distinct line phases given their own kernels (a raster whose pitch is a simple multiple
@@ -265,7 +274,7 @@ pub struct FastRemoval {
     h: (usize, usize),
     conv: MultiConvolver,
     field: Box<dyn RateField>,
-    /// Cached line-phase kernels: (quantised phase, kernel index in `conv`).
+    /// Cached line-phase kernels: (phase in 1 / 2^20 row, kernel index in `conv`).
     phases: Vec<(u32, usize)>,
 }
 
@@ -301,8 +310,9 @@ impl FastRemoval {
     fn build(field: Box<dyn RateField>, grid: &Grid) -> Result<FastRemoval, ProcessError> {
         let k = kernels_from_field(field.as_ref(), grid.dx_mm, grid.dy_mm)?;
         let (p0, p1) = k[0].half_widths();
-        // Row and column margin of the largest kernel (the box and phase kernels add one).
-        let (h0, h1) = (p0 + 1, p1 + 1);
+        // Row and column margin of the largest kernel (phase kernels add two rows, the box
+        // kernels one row or column).
+        let (h0, h1) = (p0 + 2, p1 + 1);
         let ext = grid.grown(h0, h1);
         // The output is the grid itself, at least the largest half-width inside the grown
         // grid, so a transform of the grown size is exact there (no padding needed).
@@ -359,29 +369,53 @@ impl FastRemoval {
             .to_owned()
     }
 
-    /// Distinct sub-row phases of the along-X dwell, or `None` when there are more than
-    /// [`MAX_PHASES`] (a path that wanders across rows rather than a raster).
-    fn line_phases(&self, path: &PathLog, weights: Option<&[f64]>) -> Option<Vec<u32>> {
-        let mut keys: Vec<u32> = Vec::new();
-        let mut overflow = false;
-        for_each_motion_substep(path, weights, &self.ext, |u, _, _, shares| {
-            if overflow || shares[1] <= 0.0 {
-                return;
-            }
-            let (_, q) = row_phase(u);
-            if !keys.contains(&q) {
-                if keys.len() == MAX_PHASES {
-                    overflow = true;
-                } else {
-                    keys.push(q);
-                }
+    /// The line phases of the along-X dwell, or `None` when there are more than
+    /// [`MAX_PHASES`] or one spreads over more than 1/32 row (a path that wanders across rows
+    /// rather than a raster).
+    fn line_phases(&self, path: &PathLog, weights: Option<&[f64]>) -> Option<LinePhases> {
+        let mut w_sum = vec![0.0f64; PHASE_BINS];
+        let mut wp_sum = vec![0.0f64; PHASE_BINS];
+        let mut hit = vec![false; PHASE_BINS];
+        for_each_motion_substep(path, weights, &self.ext, |u, _, w, shares| {
+            if shares[1] > 0.0 {
+                let (_, f, b) = row_phase(u);
+                let a = (w * shares[1]).abs();
+                hit[b] = true;
+                w_sum[b] += a;
+                wp_sum[b] += a * f;
             }
         });
-        (!overflow).then_some(keys)
+        let mut bin_cluster = vec![u8::MAX; PHASE_BINS];
+        let mut phase = Vec::new();
+        let mut b = 0;
+        while b < PHASE_BINS {
+            if !hit[b] {
+                b += 1;
+                continue;
+            }
+            let start = b;
+            while b < PHASE_BINS && hit[b] {
+                b += 1;
+            }
+            if b - start > MAX_PHASE_SPAN_BINS || phase.len() == MAX_PHASES {
+                return None;
+            }
+            let (w, wp) = (start..b).fold((0.0, 0.0), |(x, y), k| (x + w_sum[k], y + wp_sum[k]));
+            let mean = if w > 0.0 {
+                wp / w
+            } else {
+                (start + b) as f64 / 2.0 / PHASE_BINS as f64
+            };
+            bin_cluster[start..b].fill(phase.len() as u8);
+            phase.push(mean);
+        }
+        Some(LinePhases { bin_cluster, phase })
     }
 
-    /// Kernel index for along-X dwell at quantised phase `q` (built and cached on first use).
-    fn phase_kernel(&mut self, q: u32) -> Result<usize, ProcessError> {
+    /// Kernel index for along-X dwell at sub-row phase `phase` (built and cached on first
+    /// use; phase 0 is the centred along-X kernel).
+    fn phase_kernel(&mut self, phase: f64) -> Result<usize, ProcessError> {
+        let q = (phase * PHASE_KEY_STEPS).round() as u32;
         if q == 0 {
             return Ok(1);
         }
@@ -396,7 +430,7 @@ impl FastRemoval {
             self.field.as_ref(),
             self.grid.dx_mm,
             self.grid.dy_mm,
-            q as f64 / PHASE_STEPS,
+            q as f64 / PHASE_KEY_STEPS,
         )?;
         let k = self.conv.push_kernel(t.rate_nm_per_s.view());
         self.phases.push((q, k));
@@ -413,10 +447,11 @@ impl FastRemoval {
         // Along-X dwell of a raster goes to its line's row with the kernel of its phase;
         // `slot[i]` is the kernel index of the i-th phase.
         let phases = self.line_phases(path, weights);
-        let slot: Vec<(u32, usize)> = match &phases {
-            Some(keys) => keys
+        let slot: Vec<usize> = match &phases {
+            Some(lp) => lp
+                .phase
                 .iter()
-                .map(|&q| self.phase_kernel(q).map(|k| (q, k)))
+                .map(|&f| self.phase_kernel(f))
                 .collect::<Result<_, _>>()?,
             None => Vec::new(),
         };
@@ -427,9 +462,9 @@ impl FastRemoval {
                 if share <= 0.0 {
                     continue;
                 }
-                if kind == 1 && phases.is_some() {
-                    let (n, q) = row_phase(u);
-                    let k = slot.iter().find(|(p, _)| *p == q).map_or(1, |&(_, k)| k);
+                if let (1, Some(lp)) = (kind, &phases) {
+                    let (n, _, b) = row_phase(u);
+                    let k = slot.get(lp.bin_cluster[b] as usize).copied().unwrap_or(1);
                     let d = maps[k].get_or_insert_with(|| Array2::zeros((rows, cols)));
                     splat_cubic_row(d, n, v, w * share);
                 } else {
@@ -646,6 +681,23 @@ mod tests {
         let exact_t = deposit_exact(&p, &tif, &grid, None, &ExactOptions::default()).unwrap();
         let d = drms(&fast_t, &exact_t);
         assert!(d < 0.002 * rms, "sampled: diff {d} vs removal rms {rms}");
+        // A logged path whose lines wander by a few um: every sample has its own sub-row
+        // phase, so phases are grouped in bins (here 1/256 row = 2 um).
+        let mut rng = bonnetlab_surface::rng::Rng::new(11);
+        let mut q = p.clone();
+        q.y_mm
+            .iter_mut()
+            .for_each(|y| *y += 0.003 * (rng.uniform() - 0.5));
+        let fast_q = FastRemoval::from_field(&g, &grid)
+            .unwrap()
+            .removal(&q, None)
+            .unwrap();
+        let exact_q = deposit_exact(&q, &g, &grid, None, &ExactOptions::default()).unwrap();
+        let d = drms(&fast_q, &exact_q);
+        assert!(
+            d < 0.002 * rms,
+            "wandering lines: diff {d} vs removal rms {rms}"
+        );
     }
 
     #[test]

@@ -51,7 +51,7 @@ pub fn kernels_from_field(
     Ok([point, ax, ay])
 }
 
-/// The along-X kernel for a tool centre `phase` rows (0 <= phase < 1) below the pixel row its
+/// The along-X kernel for a tool centre `phase` rows (0 <= phase <= 1) below the pixel row its
 /// dwell is put on: `K(i, j)` is the one-pixel X average of the footprint at offset
 /// `((j - c1) dx, (i - c0 - phase) dy)` from the tool. With one such kernel per line phase a
 /// raster needs no interpolation across its lines, where a steep footprint edge (the Hertz
@@ -65,7 +65,8 @@ pub fn along_x_at_phase(
 ) -> Result<Tif, ProcessError> {
     let point = Tif::sample(field, dx_mm, dy_mm)?;
     let (h0, h1) = point.half_widths();
-    box_kernel(field, dx_mm, dy_mm, true, (h0 + 1, h1 + 1), phase)
+    // Two rows more: the footprint shifted by up to a row still fits.
+    box_kernel(field, dx_mm, dy_mm, true, (h0 + 2, h1 + 1), phase)
 }
 
 /// A (2 g0 + 1) x (2 g1 + 1) kernel: the field averaged over one pixel along X (`along_x`) or
@@ -159,11 +160,11 @@ mod tests {
             worst = worst.max((got - line_integral(&m, y)).abs() / peak);
         }
         assert!(worst < 1e-4, "{worst}");
-        // Phase 0 is the centred along-X kernel with one zero row more on each side.
+        // Phase 0 is the centred along-X kernel with two zero rows more on each side.
         let [_, ax, _] = kernels_from_field(&m, dx, dx).unwrap();
         let k0 = along_x_at_phase(&m, dx, dx, 0.0).unwrap();
         let (r, _) = ax.rate_nm_per_s.dim();
-        let d = (&k0.rate_nm_per_s.slice(ndarray::s![1..r + 1, ..]) - &ax.rate_nm_per_s)
+        let d = (&k0.rate_nm_per_s.slice(ndarray::s![2..r + 2, ..]) - &ax.rate_nm_per_s)
             .iter()
             .fold(0.0f64, |a, v| a.max(v.abs()));
         assert!(d < 1e-12);
