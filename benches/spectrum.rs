@@ -6,6 +6,8 @@
 //! 3 mm pitch along Y, a tilt and 2 nm white noise; seed 1):
 //! - `psd_xy_ripple/N`: piston + tilt removed jointly, 1-D PSD along X and along Y (periodic
 //!   Hann, per-line mean), ripple at 3 mm (5 harmonics, prominence);
+//! - `metrology/N`: the full metrology of a map (issue 9): the same removal, height statistics
+//!   of the residual, both 1-D PSDs and the ripple (`stats_psd_xy`, one fit, no residual map);
 //! - `psd_2d_radial/N`: the same removal, 2-D two-sided PSD (separable Hann), radial PSD;
 //!   N = 512, 1024, 2048, 4096 (scaling).
 //!
@@ -16,7 +18,9 @@ use std::f64::consts::PI;
 use std::hint::black_box;
 use std::time::Duration;
 
-use bonnetlab_spectrum::{psd_2d, psd_xy, ripple_from_psds, PsdOptions, RippleOptions};
+use bonnetlab_spectrum::{
+    psd_2d, psd_xy, ripple_from_psds, stats_psd_xy, PsdOptions, RippleOptions,
+};
 use bonnetlab_surface::rng::Rng;
 use bonnetlab_surface::Surface;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
@@ -47,6 +51,13 @@ fn bench(c: &mut Criterion) {
             b.iter(|| {
                 let (x, y) = psd_xy(black_box(s), &opts).expect("psd");
                 ripple_from_psds(&x, &y, PITCH_MM, &ropts).expect("ripple")
+            })
+        });
+        g.bench_with_input(BenchmarkId::new("metrology", n), &s, |b, s| {
+            b.iter(|| {
+                let (st, x, y) = stats_psd_xy(black_box(s), &opts).expect("metrology");
+                let r = ripple_from_psds(&x, &y, PITCH_MM, &ropts).expect("ripple");
+                (st, r)
             })
         });
         g.bench_with_input(BenchmarkId::new("psd_2d_radial", n), &s, |b, s| {

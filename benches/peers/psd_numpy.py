@@ -10,6 +10,11 @@ along Y, a tilt, 2 nm white noise):
                    for 5 harmonics, prominence over the median of the flanking bins, Y/X ratio.
   psd_2d_radial/N  the same removal, the map mean removed, separable Hann, two-sided 2-D PSD
                    from rfft2, radial PSD (bins of max(dfx, dfy), integrated and average forms).
+  metrology/N      the full metrology of a map (issue 9): the same removal once, height
+                   statistics of the residual (mean, Sq, Sa, Sp, Sv, Sz, Ssk, Sku as
+                   bonnetlab_surface::height_stats: two passes, moments about the mean; the
+                   fastest NumPy form: BLAS dot products for the third and fourth moments),
+                   then psd_xy_ripple's PSDs and ripple on the same residual.
 Two FFT back ends: numpy.fft (single thread) and scipy.fft with workers = all cores.
 Prints one JSON object per line {"name", "backend", "n", "median_s", "runs", "sigma1_nm"}.
 """
@@ -107,11 +112,39 @@ def ripple(fx, px, fy, py, pitch, harmonics=5):
     }
 
 
-def psd_xy_ripple(z, rfft):
-    zr = remove_piston_tilt(z, DX, DX)
+def psd_xy_ripple_of_residual(zr, rfft):
     fx, px = psd1d(zr, DX, 1, rfft)
     fy, py = psd1d(zr, DX, 0, rfft)
     return ripple(fx, px, fy, py, PITCH)
+
+
+def psd_xy_ripple(z, rfft):
+    return psd_xy_ripple_of_residual(remove_piston_tilt(z, DX, DX), rfft)
+
+
+def height_stats(zr):
+    d = zr.ravel()
+    n = d.size
+    mean = d.mean()
+    d = d - mean
+    d2 = d * d
+    var = d2.sum() / n
+    rms = np.sqrt(var)
+    m3 = np.dot(d2, d) / n
+    m4 = np.dot(d2, d2) / n
+    hi, lo = float(d.max()), float(d.min())
+    return {"mean_nm": float(mean), "rms_nm": float(rms), "sa_nm": float(np.abs(d).mean()),
+            "sp_nm": hi, "sv_nm": -lo, "sz_nm": hi - lo,
+            "ssk": float(m3 / (var * rms)), "sku": float(m4 / (var * var))}
+
+
+def metrology(z, rfft):
+    zr = remove_piston_tilt(z, DX, DX)
+    st = height_stats(zr)
+    r = psd_xy_ripple_of_residual(zr, rfft)
+    r["rms_nm"] = st["rms_nm"]
+    r["sku"] = st["sku"]
+    return r
 
 
 def psd_2d_radial(z, rfft2):
@@ -170,6 +203,11 @@ def main():
             lines.append({"name": f"psd_xy_ripple/{n}", "backend": name, "n": n, "median_s": med,
                           "runs": runs, "sigma1_nm": r["sigma1_nm"],
                           "prominence_db": r["prominence_db"]})
+            print(json.dumps(lines[-1]), flush=True)
+            med, runs, r = timed(lambda: metrology(z, rfft), reps)
+            lines.append({"name": f"metrology/{n}", "backend": name, "n": n, "median_s": med,
+                          "runs": runs, "sigma1_nm": r["sigma1_nm"], "rms_nm": r["rms_nm"],
+                          "sku": r["sku"]})
             print(json.dumps(lines[-1]), flush=True)
             med, runs, r = timed(lambda: psd_2d_radial(z, rfft2), reps)
             lines.append({"name": f"psd_2d_radial/{n}", "backend": name, "n": n, "median_s": med,

@@ -15,11 +15,12 @@ if [ ! -x "$venv/bin/python" ]; then
 fi
 out="$root/target/peers"
 mkdir -p "$out"
-echo "== machine: $(nproc) cores, $(date -u +%Y-%m-%dT%H:%MZ)"
+echo "== machine: $(nproc) cores, $(date -u +%Y-%m-%dT%H:%MZ), $(uptime | sed 's/.*load/load/')"
 echo "== criterion (release): cargo bench --bench spectrum"
-filter="spectrum/(psd_xy_ripple|psd_2d_radial)/($(echo "$sizes" | tr ',' '|'))$"
+filter="spectrum/(psd_xy_ripple|metrology|psd_2d_radial)/($(echo "$sizes" | tr ',' '|'))$"
 (cd "$root" && cargo bench --bench spectrum -- "$filter")
 echo "== peer: NumPy / SciPy"
 "$venv/bin/python" "$here/psd_numpy.py" --sizes "$sizes" --out "$out/psd_numpy.jsonl"
+echo "== after the peer: $(uptime | sed 's/.*load/load/')"
 echo "== medians side by side"
 "$venv/bin/python" "$here/compare.py" "$root/target/criterion" "$out/psd_numpy.jsonl"

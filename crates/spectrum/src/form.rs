@@ -178,7 +178,7 @@ fn fit_with_scan(
         half,
         residual_mean: 0.0,
     };
-    let sums = HeightSums::of(s.heights_nm().view(), &m.us);
+    let sums = HeightSums::of(s.heights_nm().view(), &m.us, m.power);
     let nb = m.n_basis();
     let mut full_moments = [0.0; 5];
     for &u in &m.us {
@@ -328,7 +328,7 @@ pub(crate) fn prepare<'a>(s: &'a Surface, terms: &[Term]) -> Result<Prepared<'a>
     } else {
         Cow::Owned(remove_terms(s, terms)?.0)
     };
-    let sums = HeightSums::of(surface.heights_nm().view(), &[]);
+    let sums = HeightSums::of(surface.heights_nm().view(), &[], false);
     let mean_nm = sums.row.iter().map(|r| r[0]).sum::<f64>() / mask.valid_count() as f64;
     Ok(Prepared {
         surface,

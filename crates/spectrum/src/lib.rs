@@ -5,10 +5,14 @@
 //! (nm^2 mm^2), the radial forms are labelled (`integrated_nm2_mm`, `average_nm2_mm2`).
 //! Frequencies are in cycles/mm; angular frequencies only appear in `convert`.
 //!
-//! Pipeline: global form removal (`PsdOptions::remove`, joint fit from bonnetlab_surface) ->
-//! per-line segments with short gaps interpolated -> per-segment detrend, window, zero-padded
-//! real FFT -> valid-count weighted average. FFT plans are shared and buffers reused per rayon
-//! job; results do not depend on the thread count.
+//! Pipeline: global form removal (`PsdOptions::remove`: piston / tilt / power by a joint
+//! normal-equation fit in `form`, subtracted on the fly; other terms through
+//! `bonnetlab_surface::remove_terms`) -> per-line segments with short gaps interpolated ->
+//! per-segment detrend, window, zero-padded real FFT -> valid-count weighted average. Lines
+//! without invalid pixels take a fused fast path (`dense`); the map is read once by `scan`,
+//! once per direction, and never copied. `stats_psd_xy` adds the height statistics of the
+//! residual in the X pass (the full metrology of a map). FFT plans are shared and buffers
+//! reused per rayon job; results do not depend on the thread count.
 
 pub mod band;
 #[macro_use]

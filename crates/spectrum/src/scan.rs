@@ -121,11 +121,11 @@ pub(crate) struct HeightSums {
 
 impl HeightSums {
     /// `us`: the normalised x coordinate of every column, or empty when only plain sums are
-    /// needed.
-    pub fn of(heights: ArrayView2<f64>, us: &[f64]) -> Self {
+    /// needed; `second`: whether sum(z u^2) is needed (a power term).
+    pub fn of(heights: ArrayView2<f64>, us: &[f64], second: bool) -> Self {
         let (rows, cols) = heights.dim();
         let moments = us.len() == cols && cols > 0;
-        let u2: Vec<f64> = if moments {
+        let u2: Vec<f64> = if moments && second {
             us.iter().map(|u| u * u).collect()
         } else {
             Vec::new()
@@ -187,39 +187,33 @@ fn row_sum_impl(z: &[f64], col: &mut [f64]) -> f64 {
     out
 }
 
-/// sum z, sum z u, sum z u^2 of one row, adding the row into the column sums. Four
-/// independent partial sums per moment let the compiler keep them in vector registers.
+/// sum z, sum z u, sum z u^2 (0 when `u2` is empty) of one row, adding the row into the
+/// column sums: three short loops over the row (cached after the first) vectorise better than
+/// one loop with four accumulators.
 fn row_moments(z: &[f64], us: &[f64], u2: &[f64], col: &mut [f64]) -> [f64; 3] {
-    avx2_or_baseline!(row_moments_impl(z, us, u2, col))
+    let s0 = row_sum(z, col);
+    let s1 = dot(z, us);
+    let s2 = if u2.is_empty() { 0.0 } else { dot(z, u2) };
+    [s0, s1, s2]
+}
+
+/// sum a[k] b[k] in four lanes.
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    avx2_or_baseline!(dot_impl(a, b))
 }
 
 #[inline(always)]
-fn row_moments_impl(z: &[f64], us: &[f64], u2: &[f64], col: &mut [f64]) -> [f64; 3] {
-    let (mut s0, mut s1, mut s2) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
-    let n4 = z.len() / 4 * 4;
-    for (((zc, uc), vc), cc) in z[..n4]
-        .chunks_exact(4)
-        .zip(us[..n4].chunks_exact(4))
-        .zip(u2[..n4].chunks_exact(4))
-        .zip(col[..n4].chunks_exact_mut(4))
-    {
+fn dot_impl(a: &[f64], b: &[f64]) -> f64 {
+    let mut s = [0.0f64; 4];
+    let n4 = a.len().min(b.len()) / 4 * 4;
+    for (ac, bc) in a[..n4].chunks_exact(4).zip(b[..n4].chunks_exact(4)) {
         for l in 0..4 {
-            s0[l] += zc[l];
-            s1[l] += zc[l] * uc[l];
-            s2[l] += zc[l] * vc[l];
-            cc[l] += zc[l];
+            s[l] += ac[l] * bc[l];
         }
     }
-    let mut out = [
-        (s0[0] + s0[1]) + (s0[2] + s0[3]),
-        (s1[0] + s1[1]) + (s1[2] + s1[3]),
-        (s2[0] + s2[1]) + (s2[2] + s2[3]),
-    ];
-    for k in n4..z.len() {
-        out[0] += z[k];
-        out[1] += z[k] * us[k];
-        out[2] += z[k] * u2[k];
-        col[k] += z[k];
+    let mut out = (s[0] + s[1]) + (s[2] + s[3]);
+    for k in n4..a.len().min(b.len()) {
+        out += a[k] * b[k];
     }
     out
 }
@@ -251,7 +245,7 @@ mod tests {
         assert_eq!(m.bounding_box(), Some((0, 148, 0, 36)));
 
         let us: Vec<f64> = (0..cols).map(|j| (j as f64 - 18.0) / 18.0).collect();
-        let s = HeightSums::of(h.view(), &us);
+        let s = HeightSums::of(h.view(), &us, true);
         for i in [0, 63, 64, 149] {
             let e0: f64 = h.row(i).sum();
             let e1: f64 = h.row(i).iter().zip(&us).map(|(z, u)| z * u).sum();
@@ -265,7 +259,7 @@ mod tests {
         }
         // A transposed (column-major) view gives the same sums.
         let ht = h.t().to_owned();
-        let st = HeightSums::of(ht.t(), &[]);
+        let st = HeightSums::of(ht.t(), &[], false);
         assert_eq!(st.row.len(), rows);
         assert!((st.row[5][0] - s.row[5][0]).abs() < 1e-9);
     }
