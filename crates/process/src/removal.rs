@@ -217,6 +217,11 @@ pub fn dwell_maps_by_motion(
     Ok(maps)
 }
 
+/// Map `k` of `maps`, created (zeros of `dim`) on first use.
+fn map_mut(maps: &mut [Option<Array2<f64>>], k: usize, dim: (usize, usize)) -> &mut Array2<f64> {
+    maps[k].get_or_insert_with(|| Array2::zeros(dim))
+}
+
 /// Adds `w` on row `i` at fractional column `v` with 4 Keys cubic weights along the row only.
 fn splat_cubic_row(d: &mut Array2<f64>, i: isize, v: f64, w: f64) {
     let (r, c) = d.dim();
@@ -260,6 +265,8 @@ struct LinePhases {
 /// Most distinct line phases given their own kernels (a raster whose pitch is a simple multiple
 /// of the pixel has one or a few); beyond it along-X dwell is splatted cubically across rows.
 const MAX_PHASES: usize = 8;
+/// Fixed phase nodes of the fallback (linear interpolation between their kernels).
+const PHASE_NODES: usize = 8;
 /// Phase kernels kept between calls before the cache is dropped.
 const MAX_CACHED_PHASES: usize = 16;
 
@@ -422,10 +429,6 @@ impl FastRemoval {
         if let Some(&(_, k)) = self.phases.iter().find(|(p, _)| *p == q) {
             return Ok(k);
         }
-        if self.phases.len() >= MAX_CACHED_PHASES {
-            self.phases.clear();
-            self.conv.truncate_kernels(3);
-        }
         let t = along_x_at_phase(
             self.field.as_ref(),
             self.grid.dx_mm,
@@ -437,6 +440,23 @@ impl FastRemoval {
         Ok(k)
     }
 
+    /// Kernel indices for a set of phases; the cache is dropped first when they would not fit
+    /// in it (so no index handed out here is invalidated).
+    fn phase_kernels(&mut self, phases: &[f64]) -> Result<Vec<usize>, ProcessError> {
+        let missing = phases
+            .iter()
+            .filter(|&&f| {
+                let q = (f * PHASE_KEY_STEPS).round() as u32;
+                q != 0 && !self.phases.iter().any(|(p, _)| *p == q)
+            })
+            .count();
+        if self.phases.len() + missing > MAX_CACHED_PHASES {
+            self.phases.clear();
+            self.conv.truncate_kernels(3);
+        }
+        phases.iter().map(|&f| self.phase_kernel(f)).collect()
+    }
+
     /// Removal (nm) on the map grid of a path (optional per-sample rate weights).
     pub fn removal(
         &mut self,
@@ -446,14 +466,18 @@ impl FastRemoval {
         check_weights(path, weights)?;
         // Along-X dwell of a raster goes to its line's row with the kernel of its phase;
         // `slot[i]` is the kernel index of the i-th phase.
+        // Along-X dwell goes to its row with the kernel of its line's phase; when the path has
+        // too many line phases (or they spread), it is shared linearly between kernels at the
+        // fixed phases j / PHASE_NODES instead.
         let phases = self.line_phases(path, weights);
-        let slot: Vec<usize> = match &phases {
-            Some(lp) => lp
-                .phase
-                .iter()
-                .map(|&f| self.phase_kernel(f))
-                .collect::<Result<_, _>>()?,
-            None => Vec::new(),
+        let slot = match &phases {
+            Some(lp) => self.phase_kernels(&lp.phase)?,
+            None => {
+                let nodes: Vec<f64> = (0..PHASE_NODES)
+                    .map(|j| j as f64 / PHASE_NODES as f64)
+                    .collect();
+                self.phase_kernels(&nodes)?
+            }
         };
         let (rows, cols) = (self.ext.rows, self.ext.cols);
         let mut maps: Vec<Option<Array2<f64>>> = vec![None; self.conv.kernel_count()];
@@ -462,14 +486,29 @@ impl FastRemoval {
                 if share <= 0.0 {
                     continue;
                 }
-                if let (1, Some(lp)) = (kind, &phases) {
-                    let (n, _, b) = row_phase(u);
-                    let k = slot.get(lp.bin_cluster[b] as usize).copied().unwrap_or(1);
-                    let d = maps[k].get_or_insert_with(|| Array2::zeros((rows, cols)));
-                    splat_cubic_row(d, n, v, w * share);
-                } else {
-                    let d = maps[kind].get_or_insert_with(|| Array2::zeros((rows, cols)));
-                    splat_cubic(d, u, v, w * share);
+                if kind != 1 {
+                    splat_cubic(map_mut(&mut maps, kind, (rows, cols)), u, v, w * share);
+                    continue;
+                }
+                let (n, f, b) = row_phase(u);
+                match &phases {
+                    Some(lp) => {
+                        let k = slot.get(lp.bin_cluster[b] as usize).copied().unwrap_or(1);
+                        splat_cubic_row(map_mut(&mut maps, k, (rows, cols)), n, v, w * share);
+                    }
+                    None => {
+                        let x = f * PHASE_NODES as f64;
+                        let j = (x.floor() as usize).min(PHASE_NODES - 1);
+                        let t = x - j as f64;
+                        let (k1, n1) = if j + 1 < PHASE_NODES {
+                            (slot[j + 1], n)
+                        } else {
+                            (slot[0], n + 1)
+                        };
+                        let d = map_mut(&mut maps, slot[j], (rows, cols));
+                        splat_cubic_row(d, n, v, w * share * (1.0 - t));
+                        splat_cubic_row(map_mut(&mut maps, k1, (rows, cols)), n1, v, w * share * t);
+                    }
                 }
             }
         });
@@ -697,6 +736,22 @@ mod tests {
         assert!(
             d < 0.002 * rms,
             "wandering lines: diff {d} vs removal rms {rms}"
+        );
+        // Lines every 1.55 mm on 0.5 mm pixels: ten sub-row phases, more than get their own
+        // kernels, so the dwell is shared linearly between the fixed phase kernels.
+        let r = RasterSpec::over_rect((-6.0, 46.0), (-6.0, 36.0), 1.55, 2.0);
+        let (p, _) = crate::path::kinematics::dwell_raster(&r, &dens, &dgrid, &lim, 0.2).unwrap();
+        let fast_n = FastRemoval::from_field(&g, &grid)
+            .unwrap()
+            .removal(&p, None)
+            .unwrap();
+        let exact_n = deposit_exact(&p, &g, &grid, None, &ExactOptions::default()).unwrap();
+        let mean_n = exact_n.mean().unwrap();
+        let rms_n = drms(&exact_n, &Array2::from_elem(exact_n.dim(), mean_n));
+        let d = drms(&fast_n, &exact_n);
+        assert!(
+            d < 0.005 * rms_n,
+            "many phases: diff {d} vs removal rms {rms_n}"
         );
     }
 
