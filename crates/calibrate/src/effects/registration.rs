@@ -23,6 +23,8 @@ pub struct Registration {
     /// dx_mm, dy_mm, rotation (rad).
     pub p: [f64; 3],
     pub pixel_mm: f64,
+    /// Centre of the rotation: the map centre (mm), reported so that the convention is explicit.
+    pub centre_mm: (f64, f64),
 }
 
 impl Effect for Registration {
@@ -52,6 +54,14 @@ impl Effect for Registration {
             ("dx_mm".into(), Param::Num(self.p[0])),
             ("dy_mm".into(), Param::Num(self.p[1])),
             ("rotation_deg".into(), Param::Num(self.p[2].to_degrees())),
+            (
+                "convention".into(),
+                Param::Text(format!(
+                    "a feature at p in the before map appears in the after map at \
+                     R(rotation) (p - c) + c + (dx, dy), c = ({:.4}, {:.4}) mm, the map centre",
+                    self.centre_mm.0, self.centre_mm.1
+                )),
+            ),
         ]
     }
 }
@@ -110,6 +120,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let [gx, gy, gr] = after_derivatives(p, cur.ev);
     let base = cur.ev.reg;
     let pix = g.dx_mm.max(g.dy_mm);
+    let centre = g.centre_mm();
     vec![Candidate {
         key: "registration".into(),
         kind: "registration",
@@ -118,6 +129,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
             Box::new(Registration {
                 p: [base[0] + c[0], base[1] + c[1], base[2] + c[2]],
                 pixel_mm: pix,
+                centre_mm: centre,
             })
         }),
     }]
