@@ -104,6 +104,56 @@ fn drift_and_misregistration_are_both_found() {
     );
 }
 
+fn param(c: &Calibration, kind: &str, name: &str) -> f64 {
+    c.effects
+        .iter()
+        .find(|e| e.kind == kind)
+        .unwrap_or_else(|| panic!("{kind} not found: {}", summary(c)))
+        .params[name]
+        .as_f64()
+        .unwrap()
+}
+
+/// Three at once (drift, lag, misregistration with rotation): exactly these three, each within
+/// 20 %, residual at the floor.
+#[test]
+fn three_effects_at_once_are_all_found() {
+    let c = run(
+        vec![
+            Injected::RateDrift {
+                fraction_per_run: -0.15,
+            },
+            Injected::DirectionLag { lag_mm: 0.3 },
+            Injected::Registration {
+                dx_mm: 0.25,
+                dy_mm: 0.1,
+                rotation_deg: -0.08,
+            },
+        ],
+        11,
+    );
+    assert_eq!(c.effects.len(), 3, "{}", summary(&c));
+    for (kind, name, want) in [
+        ("rate_drift", "fraction_per_run", -0.15),
+        ("direction_lag", "lag_mm", 0.3),
+        ("registration", "dx_mm", 0.25),
+        ("registration", "dy_mm", 0.1),
+        ("registration", "rotation_deg", -0.08),
+    ] {
+        let got = param(&c, kind, name);
+        assert!(
+            (got - want).abs() <= 0.2 * want.abs(),
+            "{kind} {name} {got}: {}",
+            summary(&c)
+        );
+    }
+    assert!(
+        c.final_.residual_rms_nm <= 1.3 * c.noise_floor_rms_nm,
+        "{}",
+        summary(&c)
+    );
+}
+
 /// Outside the exact forms: reported (any effect or unexplained entry) and residual halved.
 fn outside(effects: Vec<Injected>, seed: u64) -> Calibration {
     let c = run(effects, seed);

@@ -1,7 +1,8 @@
 //! Developer probe: generate a run with one injected effect (by name) and calibrate it.
 //! `cargo run --release -p bonnetlab-calibrate --example try_effect -- drift [N]`
 //! N: an N x N map of a 100 mm part (default: the 160 x 180 test run). Environment: SEED,
-//! NOISE (nm), APERTURE (disc diameter, mm), BONNETLAB_TRACE (timings per round). Prints the
+//! NOISE (nm), APERTURE (disc diameter, mm), SAMPLE_HZ (path log rate), WRITE (also write the run
+//! directory there, for the CLI), BONNETLAB_TRACE (timings per round). Prints the
 //! effects found, each round's best candidates and the timings to stderr, the JSON to stdout.
 use bonnetlab_calibrate::model::Problem;
 use bonnetlab_calibrate::run::{calibrate, Options};
@@ -39,6 +40,22 @@ fn main() {
             period_s: 300.0,
         }],
         "noise" => vec![],
+        "three" => vec![
+            Injected::RateDrift {
+                fraction_per_run: -0.15,
+            },
+            Injected::DirectionLag { lag_mm: 0.3 },
+            Injected::Registration {
+                dx_mm: 0.25,
+                dy_mm: 0.1,
+                rotation_deg: -0.08,
+            },
+        ],
+        "bigreg" => vec![Injected::Registration {
+            dx_mm: 1.3,
+            dy_mm: -0.9,
+            rotation_deg: 0.4,
+        }],
         "bench" => vec![
             Injected::RateDrift {
                 fraction_per_run: -0.2,
@@ -93,6 +110,9 @@ fn main() {
     if let Some(n) = env("NOISE") {
         cfg.noise_nm = n;
     }
+    if let Some(hz) = env("SAMPLE_HZ") {
+        cfg.sample_hz = hz;
+    }
     if let Some(n) = std::env::args()
         .nth(2)
         .and_then(|s| s.parse::<usize>().ok())
@@ -107,6 +127,10 @@ fn main() {
         run.path.len(),
         run.path.duration_s()
     );
+    if let Ok(dir) = std::env::var("WRITE") {
+        let recipe = bonnetlab_calibrate::synth::write::write_run(dir.as_ref(), &run).unwrap();
+        eprintln!("wrote {}", recipe.display());
+    }
     let t = std::time::Instant::now();
     let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).unwrap();
     let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();
