@@ -18,4 +18,5 @@ pub mod resample;
 pub mod run;
 pub mod selection;
 pub mod synth;
+pub mod uncertainty;
 pub mod unexplained;

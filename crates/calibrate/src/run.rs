@@ -9,9 +9,9 @@ use serde_json::{Map, Value};
 
 use crate::effects::{candidates, Current};
 use crate::error::CalibrateError;
-use crate::model::{fit, Effect, Eval, Fit, Linear, Param, Problem};
+use crate::model::{fit, Effect, Eval, Fit, Param, Problem};
 use crate::noise::removal_noise_floor;
-use crate::refine::{jacobian, refine, set_nl};
+use crate::refine::refine;
 use crate::selection::{base_gram, holdout, split, Score};
 use crate::unexplained::{self, Unexplained};
 
@@ -119,154 +119,6 @@ fn param_value(p: &Param) -> Value {
         Param::Text(s) => Value::String(s.clone()),
         Param::List(v) => serde_json::json!(v),
     }
-}
-
-/// Numeric parameters of all effects as one flat vector (for the delta method).
-fn flat_params(effects: &[Box<dyn Effect>], lin: &Linear) -> Vec<f64> {
-    let mut v = Vec::new();
-    for e in effects {
-        for (_, p) in e.params(lin) {
-            match p {
-                Param::Num(x) => v.push(x),
-                Param::List(xs) => v.extend(xs),
-                Param::Text(_) => {}
-            }
-        }
-    }
-    v
-}
-
-/// One-sigma uncertainties of every numeric parameter: full Jacobian J (linear columns and
-/// forward-difference columns of the non-linear parameters at fixed linear coefficients),
-/// propagated to the reported parameters by finite differences. Two covariances of the fitted
-/// vector are formed and the larger variance kept for each parameter:
-/// - classical `s^2 (J^T J)^-1`, `s^2 = RSS / (n - p)`, right for independent residuals;
-/// - cluster-robust (sandwich) `A^-1 B A^-1`, `A = J^T J`, `B = G / (G - 1) sum_b u_b u_b^T`,
-///   `u_b = J_b^T r_b` summed over the pixels of hold-out block b (G blocks): residual structure
-///   correlated within a block (unmodelled MSF, interpolation error) widens it, where the
-///   classical form would be optimistic.
-fn uncertainties(
-    p: &Problem,
-    effects: &[Box<dyn Effect>],
-    ev: &Eval,
-    f: &Fit,
-    blocks: &crate::selection::Split,
-) -> Result<Vec<f64>, CalibrateError> {
-    let lin_cols: Vec<Vec<f64>> = ev
-        .cols
-        .iter()
-        .map(|c| c.iter().zip(&ev.w).map(|(a, w)| a * w).collect())
-        .collect();
-    let nl_cols = jacobian(p, effects, ev, f, false)?;
-    let nlin = lin_cols.len();
-    let all: Vec<&[f64]> = lin_cols
-        .iter()
-        .map(|c| c.as_slice())
-        .chain(nl_cols.iter().map(|c| c.as_slice()))
-        .collect();
-    let n = all.len();
-    let mut jtj = vec![vec![0.0; n]; n];
-    for a in 0..n {
-        for b in a..n {
-            let s: f64 = all[a].iter().zip(all[b]).map(|(x, y)| x * y).sum();
-            jtj[a][b] = s;
-            jtj[b][a] = s;
-        }
-    }
-    let cov = crate::lsq::inverse(&jtj)
-        .ok_or_else(|| CalibrateError::Processing("singular covariance".into()))?;
-    let s2 = f.rss / (f.n - n as f64).max(1.0);
-    let robust = sandwich(&all, &f.resid, &cov, blocks);
-    let lin0 = ev.linear(f);
-    let base = flat_params(effects, &lin0);
-    let theta0: Vec<f64> = effects.iter().flat_map(|e| e.nl()).collect();
-    let steps: Vec<f64> = effects.iter().flat_map(|e| e.nl_steps()).collect();
-    let mut grads = vec![vec![0.0; n]; base.len()];
-    for j in 0..n {
-        let (vals, h) = if j < nlin {
-            let h = 1e-6 * f.coef[j].abs().max(1e-9);
-            let mut lin = lin0.clone();
-            lin.coef[j] += h;
-            (flat_params(effects, &lin), h)
-        } else {
-            let k = j - nlin;
-            let mut t = theta0.clone();
-            t[k] += steps[k];
-            let mut trial: Vec<Box<dyn Effect>> = effects.to_vec();
-            set_nl(&mut trial, &t);
-            (flat_params(&trial, &lin0), steps[k])
-        };
-        for (g, (v, b)) in grads.iter_mut().zip(vals.iter().zip(&base)) {
-            g[j] = (v - b) / h;
-        }
-    }
-    Ok(grads
-        .iter()
-        .map(|g| {
-            let quad = |c: &[Vec<f64>]| {
-                let mut s = 0.0;
-                for a in 0..n {
-                    for b in 0..n {
-                        s += g[a] * c[a][b] * g[b];
-                    }
-                }
-                s
-            };
-            let classical = s2 * quad(&cov);
-            let clustered = robust.as_deref().map(quad).unwrap_or(0.0);
-            classical.max(clustered).max(0.0).sqrt()
-        })
-        .collect())
-}
-
-/// Cluster-robust covariance `A^-1 B A^-1` with the hold-out blocks as clusters (see
-/// `uncertainties`); `None` with fewer than 8 populated blocks.
-fn sandwich(
-    cols: &[&[f64]],
-    resid: &[f64],
-    a_inv: &[Vec<f64>],
-    sp: &crate::selection::Split,
-) -> Option<Vec<Vec<f64>>> {
-    let n = cols.len();
-    let mut u = vec![vec![0.0; n]; sp.n_blocks];
-    let mut used = vec![false; sp.n_blocks];
-    for (i, (&b, &r)) in sp.block.iter().zip(resid).enumerate() {
-        if r == 0.0 {
-            continue;
-        }
-        used[b] = true;
-        for (k, c) in cols.iter().enumerate() {
-            u[b][k] += c[i] * r;
-        }
-    }
-    let g = used.iter().filter(|v| **v).count() as f64;
-    if g < 8.0 {
-        return None;
-    }
-    let mut bm = vec![vec![0.0; n]; n];
-    for ub in u.iter().zip(&used).filter(|(_, u)| **u).map(|(v, _)| v) {
-        for a in 0..n {
-            for c in 0..n {
-                bm[a][c] += ub[a] * ub[c];
-            }
-        }
-    }
-    let corr = g / (g - 1.0);
-    let mut t = vec![vec![0.0; n]; n];
-    for a in 0..n {
-        for c in 0..n {
-            t[a][c] = (0..n).map(|k| a_inv[a][k] * bm[k][c]).sum::<f64>() * corr;
-        }
-    }
-    Some(
-        (0..n)
-            .map(|a| {
-                (0..n)
-                    .map(|c| (0..n).map(|k| t[a][k] * a_inv[k][c]).sum())
-                    .collect()
-            })
-            .collect(),
-    )
 }
 
 /// Tie-break order of effect kinds (spec table first).
@@ -518,7 +370,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     let sig = if effects.is_empty() {
         Vec::new()
     } else {
-        uncertainties(p, &effects, &ev, &f, &sp).unwrap_or_default()
+        crate::uncertainty::uncertainties(p, &effects, &ev, &f, &sp).unwrap_or_default()
     };
     let mut k = 0;
     let mut reports = Vec::new();
