@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Side-by-side timing of the spectral workloads: criterion (benches/spectrum.rs, release) and
 # the NumPy / SciPy peer (psd_numpy.py) on the same machine, then a Markdown table of medians
-# and ratios. Creates its own virtual environment (benches/peers/.venv) on first use.
+# and ratios; at 4096 also interleave.py (the two sides alternate, so both see the same load).
+# Creates its own virtual environment (benches/peers/.venv) on first use.
 # Usage: benches/peers/run.sh [SIZES]   (SIZES default 512,1024,2048,4096)
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
@@ -24,3 +25,8 @@ echo "== peer: NumPy / SciPy"
 echo "== after the peer: $(uptime | sed 's/.*load/load/')"
 echo "== medians side by side"
 "$venv/bin/python" "$here/compare.py" "$root/target/criterion" "$out/psd_numpy.jsonl"
+if [[ ",$sizes," == *",4096,"* ]]; then
+    echo "== interleaved at 4096 (bonnetlab and NumPy alternate: same load)"
+    (cd "$root" && cargo build --release -p bonnetlab-spectrum --example time_psd)
+    "$venv/bin/python" "$here/interleave.py" "$root/target/release/examples/time_psd" --size 4096
+fi
