@@ -19,7 +19,7 @@ use crate::error::ProcessError;
 use crate::fft::{fast_len, Convolver, MultiConvolver};
 use crate::grid::Grid;
 use crate::path::PathLog;
-use crate::tif::motion::{along_x_at_phase, kernels_from_field};
+use crate::tif::motion::{along_x_at_phase, along_y_at_phase, kernels_from_field};
 use crate::tif::{RateField, Tif};
 
 fn check_weights(path: &PathLog, weights: Option<&[f64]>) -> Result<(), ProcessError> {
@@ -217,6 +217,22 @@ pub fn dwell_maps_by_motion(
     Ok(maps)
 }
 
+/// Adds `w` in column `j` at fractional row `u` with 4 Keys cubic weights along the column only.
+fn splat_cubic_col(d: &mut Array2<f64>, u: f64, j: isize, w: f64) {
+    let (r, c) = d.dim();
+    if j < 0 || j as usize >= c || !(u > -2.0 && u < r as f64 + 1.0) {
+        return;
+    }
+    let i0 = u.floor() as isize;
+    let mut col = d.column_mut(j as usize);
+    for (a, wi) in keys_weights(u - i0 as f64).iter().enumerate() {
+        let i = i0 - 1 + a as isize;
+        if i >= 0 && (i as usize) < r {
+            col[i as usize] += w * wi;
+        }
+    }
+}
+
 /// Map `k` of `maps`, created (zeros of `dim`) on first use.
 fn map_mut(maps: &mut [Option<Array2<f64>>], k: usize, dim: (usize, usize)) -> &mut Array2<f64> {
     maps[k].get_or_insert_with(|| Array2::zeros(dim))
@@ -281,8 +297,9 @@ pub struct FastRemoval {
     h: (usize, usize),
     conv: MultiConvolver,
     field: Box<dyn RateField>,
-    /// Cached line-phase kernels: (phase in 1 / 2^20 row, kernel index in `conv`).
-    phases: Vec<(u32, usize)>,
+    /// Cached line-phase kernels: (motion kind 1 = along X / 2 = along Y, phase in 1 / 2^20
+    /// pixel, kernel index in `conv`).
+    phases: Vec<(usize, u32, usize)>,
 }
 
 impl std::fmt::Debug for FastRemoval {
@@ -317,9 +334,8 @@ impl FastRemoval {
     fn build(field: Box<dyn RateField>, grid: &Grid) -> Result<FastRemoval, ProcessError> {
         let k = kernels_from_field(field.as_ref(), grid.dx_mm, grid.dy_mm)?;
         let (p0, p1) = k[0].half_widths();
-        // Row and column margin of the largest kernel (phase kernels add two rows, the box
-        // kernels one row or column).
-        let (h0, h1) = (p0 + 2, p1 + 1);
+        // Row and column margin of the largest kernel (phase kernels add two rows or columns).
+        let (h0, h1) = (p0 + 2, p1 + 2);
         let ext = grid.grown(h0, h1);
         // The output is the grid itself, at least the largest half-width inside the grown
         // grid, so a transform of the grown size is exact there (no padding needed).
@@ -376,24 +392,34 @@ impl FastRemoval {
             .to_owned()
     }
 
-    /// The line phases of the along-X dwell, or `None` when there are more than
-    /// [`MAX_PHASES`] or one spreads over more than 1/32 row (a path that wanders across rows
-    /// rather than a raster).
-    fn line_phases(&self, path: &PathLog, weights: Option<&[f64]>) -> Option<LinePhases> {
+    /// The line phases of the along-X (`kind` 1: sub-row) or along-Y (`kind` 2: sub-column)
+    /// dwell, or `None` when there are more than [`MAX_PHASES`] or one spreads over more than
+    /// 1/32 pixel (a path that wanders rather than a raster).
+    fn line_phases(
+        &self,
+        path: &PathLog,
+        weights: Option<&[f64]>,
+        kind: usize,
+    ) -> Option<LinePhases> {
         let mut w_sum = vec![0.0f64; PHASE_BINS];
         let mut wp_sum = vec![0.0f64; PHASE_BINS];
         let mut hit = vec![false; PHASE_BINS];
-        for_each_motion_substep(path, weights, &self.ext, |u, _, w, shares| {
-            if shares[1] > 0.0 {
-                let (_, f, b) = row_phase(u);
-                let a = (w * shares[1]).abs();
+        let mut any = false;
+        for_each_motion_substep(path, weights, &self.ext, |u, v, w, shares| {
+            if shares[kind] > 0.0 {
+                let (_, f, b) = row_phase(if kind == 1 { u } else { v });
+                let a = (w * shares[kind]).abs();
                 hit[b] = true;
+                any = true;
                 w_sum[b] += a;
                 wp_sum[b] += a * f;
             }
         });
         let mut bin_cluster = vec![u8::MAX; PHASE_BINS];
         let mut phase = Vec::new();
+        if !any {
+            return Some(LinePhases { bin_cluster, phase });
+        }
         let mut b = 0;
         while b < PHASE_BINS {
             if !hit[b] {
@@ -419,42 +445,52 @@ impl FastRemoval {
         Some(LinePhases { bin_cluster, phase })
     }
 
-    /// Kernel index for along-X dwell at sub-row phase `phase` (built and cached on first
-    /// use; phase 0 is the centred along-X kernel).
-    fn phase_kernel(&mut self, phase: f64) -> Result<usize, ProcessError> {
+    /// Kernel index for dwell of motion `kind` (1 along X, 2 along Y) at sub-pixel phase
+    /// `phase` across the motion (built and cached on first use; phase 0 is the centred
+    /// kernel of that motion).
+    fn phase_kernel(&mut self, kind: usize, phase: f64) -> Result<usize, ProcessError> {
         let q = (phase * PHASE_KEY_STEPS).round() as u32;
         if q == 0 {
-            return Ok(1);
+            return Ok(kind);
         }
-        if let Some(&(_, k)) = self.phases.iter().find(|(p, _)| *p == q) {
+        if let Some(&(_, _, k)) = self.phases.iter().find(|(c, p, _)| *c == kind && *p == q) {
             return Ok(k);
         }
-        let t = along_x_at_phase(
-            self.field.as_ref(),
-            self.grid.dx_mm,
-            self.grid.dy_mm,
-            q as f64 / PHASE_KEY_STEPS,
-        )?;
+        let (f, dx, dy) = (self.field.as_ref(), self.grid.dx_mm, self.grid.dy_mm);
+        let ph = q as f64 / PHASE_KEY_STEPS;
+        let t = if kind == 1 {
+            along_x_at_phase(f, dx, dy, ph)?
+        } else {
+            along_y_at_phase(f, dx, dy, ph)?
+        };
         let k = self.conv.push_kernel(t.rate_nm_per_s.view());
-        self.phases.push((q, k));
+        self.phases.push((kind, q, k));
         Ok(k)
     }
 
-    /// Kernel indices for a set of phases; the cache is dropped first when they would not fit
-    /// in it (so no index handed out here is invalidated).
-    fn phase_kernels(&mut self, phases: &[f64]) -> Result<Vec<usize>, ProcessError> {
-        let missing = phases
-            .iter()
-            .filter(|&&f| {
-                let q = (f * PHASE_KEY_STEPS).round() as u32;
-                q != 0 && !self.phases.iter().any(|(p, _)| *p == q)
-            })
-            .count();
+    /// Kernel indices for the phases of each motion kind; the cache is dropped first when they
+    /// would not fit in it (so no index handed out here is invalidated).
+    fn phase_kernels(&mut self, wanted: [&[f64]; 2]) -> Result<[Vec<usize>; 2], ProcessError> {
+        let mut missing = 0;
+        for (kind, phases) in [(1, wanted[0]), (2, wanted[1])] {
+            missing += phases
+                .iter()
+                .filter(|&&f| {
+                    let q = (f * PHASE_KEY_STEPS).round() as u32;
+                    q != 0 && !self.phases.iter().any(|(c, p, _)| *c == kind && *p == q)
+                })
+                .count();
+        }
         if self.phases.len() + missing > MAX_CACHED_PHASES {
             self.phases.clear();
             self.conv.truncate_kernels(3);
         }
-        phases.iter().map(|&f| self.phase_kernel(f)).collect()
+        let mut get = |kind: usize, phases: &[f64]| -> Result<Vec<usize>, ProcessError> {
+            phases.iter().map(|&f| self.phase_kernel(kind, f)).collect()
+        };
+        let x = get(1, wanted[0])?;
+        let y = get(2, wanted[1])?;
+        Ok([x, y])
     }
 
     /// Removal (nm) on the map grid of a path (optional per-sample rate weights).
@@ -464,50 +500,58 @@ impl FastRemoval {
         weights: Option<&[f64]>,
     ) -> Result<Array2<f64>, ProcessError> {
         check_weights(path, weights)?;
-        // Along-X dwell of a raster goes to its line's row with the kernel of its phase;
-        // `slot[i]` is the kernel index of the i-th phase.
-        // Along-X dwell goes to its row with the kernel of its line's phase; when the path has
-        // too many line phases (or they spread), it is shared linearly between kernels at the
-        // fixed phases j / PHASE_NODES instead.
-        let phases = self.line_phases(path, weights);
-        let slot = match &phases {
-            Some(lp) => self.phase_kernels(&lp.phase)?,
-            None => {
-                let nodes: Vec<f64> = (0..PHASE_NODES)
-                    .map(|j| j as f64 / PHASE_NODES as f64)
-                    .collect();
-                self.phase_kernels(&nodes)?
-            }
-        };
+        // Dwell moving along X (Y) goes to its row (column) with the kernel of its line's
+        // sub-row (sub-column) phase; when a path has too many line phases, or they spread,
+        // it is shared linearly between kernels at the fixed phases j / PHASE_NODES instead.
+        let nodes: Vec<f64> = (0..PHASE_NODES)
+            .map(|j| j as f64 / PHASE_NODES as f64)
+            .collect();
+        let px = self.line_phases(path, weights, 1);
+        let py = self.line_phases(path, weights, 2);
+        let [sx, sy] = self.phase_kernels([
+            px.as_ref().map_or(&nodes[..], |l| &l.phase[..]),
+            py.as_ref().map_or(&nodes[..], |l| &l.phase[..]),
+        ])?;
         let (rows, cols) = (self.ext.rows, self.ext.cols);
         let mut maps: Vec<Option<Array2<f64>>> = vec![None; self.conv.kernel_count()];
         for_each_motion_substep(path, weights, &self.ext, |u, v, w, shares| {
-            for (kind, share) in shares.into_iter().enumerate() {
+            if shares[0] > 0.0 {
+                splat_cubic(map_mut(&mut maps, 0, (rows, cols)), u, v, w * shares[0]);
+            }
+            for (kind, phases, slot) in [(1, &px, &sx), (2, &py, &sy)] {
+                let share = shares[kind];
                 if share <= 0.0 {
                     continue;
                 }
-                if kind != 1 {
-                    splat_cubic(map_mut(&mut maps, kind, (rows, cols)), u, v, w * share);
-                    continue;
-                }
-                let (n, f, b) = row_phase(u);
-                match &phases {
+                // Across the motion: `n` whole pixels plus phase `f`; along it: `along`.
+                let (across, along) = if kind == 1 { (u, v) } else { (v, u) };
+                let (n, f, b) = row_phase(across);
+                let put = |maps: &mut Vec<Option<Array2<f64>>>, k: usize, n: isize, w: f64| {
+                    let d = map_mut(maps, k, (rows, cols));
+                    if kind == 1 {
+                        splat_cubic_row(d, n, along, w);
+                    } else {
+                        splat_cubic_col(d, along, n, w);
+                    }
+                };
+                match phases {
                     Some(lp) => {
-                        let k = slot.get(lp.bin_cluster[b] as usize).copied().unwrap_or(1);
-                        splat_cubic_row(map_mut(&mut maps, k, (rows, cols)), n, v, w * share);
+                        let k = slot
+                            .get(lp.bin_cluster[b] as usize)
+                            .copied()
+                            .unwrap_or(kind);
+                        put(&mut maps, k, n, w * share);
                     }
                     None => {
                         let x = f * PHASE_NODES as f64;
                         let j = (x.floor() as usize).min(PHASE_NODES - 1);
                         let t = x - j as f64;
-                        let (k1, n1) = if j + 1 < PHASE_NODES {
-                            (slot[j + 1], n)
+                        put(&mut maps, slot[j], n, w * share * (1.0 - t));
+                        if j + 1 < PHASE_NODES {
+                            put(&mut maps, slot[j + 1], n, w * share * t);
                         } else {
-                            (slot[0], n + 1)
-                        };
-                        let d = map_mut(&mut maps, slot[j], (rows, cols));
-                        splat_cubic_row(d, n, v, w * share * (1.0 - t));
-                        splat_cubic_row(map_mut(&mut maps, k1, (rows, cols)), n1, v, w * share * t);
+                            put(&mut maps, slot[0], n + 1, w * share * t);
+                        }
                     }
                 }
             }
@@ -752,6 +796,25 @@ mod tests {
         assert!(
             d < 0.005 * rms_n,
             "many phases: diff {d} vs removal rms {rms_n}"
+        );
+        // Scanned along Y, lines every 1.7 mm between pixel columns: per-column-phase kernels.
+        let mut r = RasterSpec::over_rect((-6.0, 46.0), (-6.0, 36.0), 1.7, 2.0);
+        r.axis = crate::path::ScanAxis::Y;
+        r.scan_range_mm = (-6.0, 36.0);
+        r.step_range_mm = (-6.0, 46.0);
+        let (p, _) = crate::path::kinematics::dwell_raster(&r, &dens, &dgrid, &lim, 0.2).unwrap();
+        let fast_y = FastRemoval::from_field(&g, &grid)
+            .unwrap()
+            .removal(&p, None)
+            .unwrap();
+        let exact_y = deposit_exact(&p, &g, &grid, None, &ExactOptions::default()).unwrap();
+        let mean_y = exact_y.mean().unwrap();
+        let rms_y = drms(&exact_y, &Array2::from_elem(exact_y.dim(), mean_y));
+        let d = drms(&fast_y, &exact_y);
+        assert!(rms_y > 0.05 * mean_y);
+        assert!(
+            d < 0.002 * rms_y,
+            "along Y: diff {d} vs removal rms {rms_y}"
         );
     }
 

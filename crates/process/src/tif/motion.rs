@@ -69,8 +69,22 @@ pub fn along_x_at_phase(
     box_kernel(field, dx_mm, dy_mm, true, (h0 + 2, h1 + 1), phase)
 }
 
+/// The along-Y kernel for a tool centre `phase` columns (0 <= phase <= 1) right of the pixel
+/// column its dwell is put on (lines scanned along Y): [`along_x_at_phase`] with the axes
+/// swapped.
+pub fn along_y_at_phase(
+    field: &dyn RateField,
+    dx_mm: f64,
+    dy_mm: f64,
+    phase: f64,
+) -> Result<Tif, ProcessError> {
+    let point = Tif::sample(field, dx_mm, dy_mm)?;
+    let (h0, h1) = point.half_widths();
+    box_kernel(field, dx_mm, dy_mm, false, (h0 + 1, h1 + 2), phase)
+}
+
 /// A (2 g0 + 1) x (2 g1 + 1) kernel: the field averaged over one pixel along X (`along_x`) or
-/// Y, its rows shifted by `phase` rows.
+/// Y, shifted across that axis by `phase` pixels (rows for along X, columns for along Y).
 fn box_kernel(
     field: &dyn RateField,
     dx_mm: f64,
@@ -80,9 +94,10 @@ fn box_kernel(
     phase: f64,
 ) -> Result<Tif, ProcessError> {
     let rate = Array2::from_shape_fn((2 * g0 + 1, 2 * g1 + 1), |(i, j)| {
+        let (px, py) = if along_x { (0.0, phase) } else { (phase, 0.0) };
         let (cx, cy) = (
-            (j as f64 - g1 as f64) * dx_mm,
-            (i as f64 - g0 as f64 - phase) * dy_mm,
+            (j as f64 - g1 as f64 - px) * dx_mm,
+            (i as f64 - g0 as f64 - py) * dy_mm,
         );
         let mut s = 0.0;
         for k in 0..SUB {
@@ -168,5 +183,11 @@ mod tests {
             .iter()
             .fold(0.0f64, |a, v| a.max(v.abs()));
         assert!(d < 1e-12);
+        // Along Y is along X with the axes swapped (the four-step footprint is symmetric).
+        let ky = along_y_at_phase(&m, dx, dx, phase).unwrap();
+        let d = (&ky.rate_nm_per_s - &k.rate_nm_per_s.t())
+            .iter()
+            .fold(0.0f64, |a, v| a.max(v.abs()));
+        assert!(d < 1e-9 * k.peak_rate_nm_per_s(), "{d}");
     }
 }
