@@ -1,8 +1,11 @@
 //! Removal simulation, two ways that must agree:
 //!
-//! - **fast**: the path's dwell time is splatted bilinearly onto the map grid grown by the TIF
-//!   half-width ([`dwell_map`]), then convolved with the TIF sampled at the map pitch by an FFT
-//!   whose plans and kernel spectrum are kept in a [`FastRemoval`] workspace;
+//! - **fast** ([`FastRemoval`]): the path's dwell time is splatted onto the map grid grown by
+//!   the TIF half-width, split by motion (resting, along X, along Y; raster lines by their
+//!   sub-pixel phase across the motion), and each part is convolved by FFT with the matching
+//!   kernel of [`crate::tif::motion`] (point samples, or the TIF averaged over one pixel along
+//!   the motion), summed through one inverse transform. Plans and kernel spectra are kept in
+//!   the workspace. (Plain dwell maps: [`dwell_map`], [`convolve_tif`].)
 //! - **exact** ([`deposit_exact`]): the instantaneous TIF, evaluated at the true offset of every
 //!   pixel from the tool (a [`RateField`], analytic for models), deposited along the path in
 //!   sub-steps of at most a quarter pixel and 1/80 of the footprint's half-extent (midpoint
