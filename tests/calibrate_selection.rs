@@ -154,6 +154,30 @@ fn three_effects_at_once_are_all_found() {
     );
 }
 
+/// A misregistration of several millimetres is first mistaken for a path offset (a wiggle at
+/// the raster pitch wins round one); once the registration is found, that stand-in refines to
+/// nothing (3 um) and the backward check must drop it: only the registration is reported.
+#[test]
+fn large_misregistration_leaves_no_stand_in_effect() {
+    let c = run(
+        vec![Injected::Registration {
+            dx_mm: 3.3,
+            dy_mm: -0.9,
+            rotation_deg: 0.4,
+        }],
+        11,
+    );
+    let kinds: Vec<&str> = c.effects.iter().map(|e| e.kind.as_str()).collect();
+    assert_eq!(kinds, ["registration"], "{}", summary(&c));
+    assert!((param(&c, "registration", "dx_mm") - 3.3).abs() < 0.05 * 3.3);
+    assert!((param(&c, "registration", "rotation_deg") - 0.4).abs() < 0.05 * 0.4);
+    assert!(
+        c.final_.residual_rms_nm <= 1.3 * c.noise_floor_rms_nm,
+        "{}",
+        summary(&c)
+    );
+}
+
 /// Outside the exact forms: reported (any effect or unexplained entry) and residual halved.
 fn outside(effects: Vec<Injected>, seed: u64) -> Calibration {
     let c = run(effects, seed);
