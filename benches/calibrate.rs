@@ -8,30 +8,12 @@
 
 use bonnetlab::calibrate::model::Problem;
 use bonnetlab::calibrate::run::{calibrate, Options};
-use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig, SynthRun};
+use bonnetlab::calibrate::synth::{generate, SynthConfig, SynthRun};
 use bonnetlab::calibrate::tif::TifMap;
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn make(n: usize) -> SynthRun {
-    let cfg = SynthConfig {
-        rows: n,
-        cols: n,
-        pixel_mm: 100.0 / n as f64,
-        deposit_step_mm: 0.2,
-        seed: 5,
-        effects: vec![
-            Injected::RateDrift {
-                fraction_per_run: -0.2,
-            },
-            Injected::Registration {
-                dx_mm: 0.2,
-                dy_mm: -0.15,
-                rotation_deg: 0.05,
-            },
-        ],
-        ..SynthConfig::default()
-    };
-    generate(&cfg).expect("synthetic run")
+    generate(&SynthConfig::reference_large_run(n)).expect("synthetic run")
 }
 
 fn bench(c: &mut Criterion) {

@@ -56,16 +56,7 @@ fn main() {
             dy_mm: -0.9,
             rotation_deg: 0.4,
         }],
-        "bench" => vec![
-            Injected::RateDrift {
-                fraction_per_run: -0.2,
-            },
-            Injected::Registration {
-                dx_mm: 0.2,
-                dy_mm: -0.15,
-                rotation_deg: 0.05,
-            },
-        ],
+        "bench" => SynthConfig::reference_large_run(800).effects,
         "step" => vec![Injected::RateStep {
             at_tau: 0.4,
             fraction: 0.2,

@@ -38,26 +38,9 @@ struct LineShift {
     c2r: Arc<dyn ComplexToReal<f64>>,
 }
 
-/// Smallest odd m >= n whose prime factors are 3, 5 and 7 only.
-fn odd_fast_len(n: usize) -> usize {
-    let mut m = n.max(1) | 1;
-    loop {
-        let mut k = m;
-        for p in [3, 5, 7] {
-            while k.is_multiple_of(p) {
-                k /= p;
-            }
-        }
-        if k == 1 {
-            return m;
-        }
-        m += 2;
-    }
-}
-
 impl LineShift {
     fn new(n: usize) -> Self {
-        let len = odd_fast_len(2 * n);
+        let len = crate::fftconv::smooth_len(2 * n, &[3, 5, 7], true);
         let mut p = RealFftPlanner::<f64>::new();
         LineShift {
             n,

@@ -162,6 +162,32 @@ impl Default for SynthConfig {
     }
 }
 
+impl SynthConfig {
+    /// The reference large run of the calibration bench and the examples: an n x n map of a
+    /// 100 mm part (pixel 100 / n mm, deposition every 0.2 mm), seed 5, with a rate drift of
+    /// -20 % and a misregistration of (0.2, -0.15) mm and 0.05 deg.
+    pub fn reference_large_run(n: usize) -> SynthConfig {
+        SynthConfig {
+            rows: n,
+            cols: n,
+            pixel_mm: 100.0 / n as f64,
+            deposit_step_mm: 0.2,
+            seed: 5,
+            effects: vec![
+                Injected::RateDrift {
+                    fraction_per_run: -0.2,
+                },
+                Injected::Registration {
+                    dx_mm: 0.2,
+                    dy_mm: -0.15,
+                    rotation_deg: 0.05,
+                },
+            ],
+            ..SynthConfig::default()
+        }
+    }
+}
+
 /// A generated run.
 #[derive(Debug, Clone)]
 pub struct SynthRun {
