@@ -1,6 +1,9 @@
 //! Process benchmarks (criterion): dwell solving on the two public cases (issue targets: case A
 //! <= 0.05 s, case B <= 0.1 s) and the fast removal of a 100 x 100 mm run at 0.1 mm pixels over
-//! a 60-minute raster (target <= 2 s). Run: `cargo bench --bench process`.
+//! a 60-minute raster (target <= 2 s). `removal_scaling` varies the path duration (15 to 120 min
+//! at 0.1 mm pixels, by feed and by repeated passes) and the map pixel (0.2 / 0.05 mm at 60 min),
+//! set-up included.
+//! Run: `cargo bench --bench process`.
 
 use std::path::Path;
 use std::time::Duration;
@@ -62,13 +65,22 @@ fn dwell(c: &mut Criterion) {
 /// A 100 x 100 mm part at 0.1 mm pixels, the paper's bonnet, a raster at 3 mm pitch whose feed
 /// realises a smooth dwell map, stretched to 60 minutes.
 fn run_60_min() -> (Grid, BonnetTif, bonnetlab::process::PathLog) {
-    let grid = Grid::new(1000, 1000, 0.1, 0.1, 0.0, 0.0).expect("grid");
+    run(60.0, 0.1)
+}
+
+/// The same part and raster at `pixel_mm` map pixels, with the dwell density scaled so that
+/// the path lasts about `minutes` (the path geometry, hence its sample count per second, is
+/// unchanged: longer runs mean slower feed and more samples).
+fn run(minutes: f64, pixel_mm: f64) -> (Grid, BonnetTif, bonnetlab::process::PathLog) {
+    let n = (100.0 / pixel_mm).round() as usize;
+    let grid = Grid::new(n, n, pixel_mm, pixel_mm, 0.0, 0.0).expect("grid");
     let tif = BonnetTif::new(&BonnetTifParams::paper(20.0)).expect("tif");
     let dgrid = Grid::new(120, 120, 1.0, 1.0, -10.0, -10.0).expect("grid");
     // 60 min over ~3600 mm of lines at 3 mm pitch: ~0.33 s/mm^2 on average, +-30 %.
+    let scale = minutes / 60.0;
     let dens = Array2::from_shape_fn((120, 120), |(i, j)| {
         let (x, y) = (j as f64 - 60.0, i as f64 - 60.0);
-        0.3 * (1.0 + 0.3 * (-(x * x + y * y) / 800.0).exp())
+        scale * 0.3 * (1.0 + 0.3 * (-(x * x + y * y) / 800.0).exp())
     });
     let mut spec = RasterSpec::over_rect((-5.0, 105.0), (-3.0, 103.0), 3.0, 1.6);
     spec.sample_dt_s = 0.1;
@@ -109,5 +121,78 @@ fn removal(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, dwell, removal);
+/// `passes` runs of `pass`, odd ones traversed backwards so the tool never jumps: a path whose
+/// length and sample count grow with its duration (a lab's repeated raster).
+fn repeat_passes(pass: &bonnetlab::process::PathLog, passes: usize) -> bonnetlab::process::PathLog {
+    let n = pass.t_s.len();
+    let (t0, t1) = (pass.t_s[0], pass.t_s[n - 1]);
+    let (mut t, mut x, mut y) = (Vec::new(), Vec::new(), Vec::new());
+    for k in 0..passes {
+        // Each later pass starts one sample after the previous one ends, at the same point.
+        let skip = usize::from(k > 0);
+        for m in skip..n {
+            let src = if k % 2 == 0 { m } else { n - 1 - m };
+            let dt = if k % 2 == 0 {
+                pass.t_s[m] - t0
+            } else {
+                t1 - pass.t_s[n - 1 - m]
+            };
+            t.push(k as f64 * (t1 - t0) + dt);
+            x.push(pass.x_mm[src]);
+            y.push(pass.y_mm[src]);
+        }
+    }
+    bonnetlab::process::PathLog::new(t, x, y).expect("repeated path")
+}
+
+/// Fast removal with set-up (as `simulate` runs it) against path duration at 0.1 mm pixels, two
+/// ways: the same raster at a slower feed (`feed`: sample count fixed, since `dwell_raster`
+/// samples by arc length) and a 15-minute raster repeated (`passes`: length and samples grow
+/// with duration); then against map pixel for the 60-minute single-pass path.
+fn removal_scaling(c: &mut Criterion) {
+    let mut g = c.benchmark_group("removal_scaling");
+    g.sample_size(10).measurement_time(Duration::from_secs(3));
+    let (_, _, pass_15) = run(15.0, 0.1);
+    let mut cases = Vec::new();
+    for minutes in [15.0, 30.0, 60.0, 120.0] {
+        let (grid, tif, path) = run(minutes, 0.1);
+        cases.push((format!("{minutes}min_0.1mm_feed"), grid, tif, path));
+    }
+    for passes in [1, 2, 4, 8] {
+        let (grid, tif, _) = run(15.0, 0.1);
+        let path = repeat_passes(&pass_15, passes);
+        cases.push((format!("{}min_0.1mm_passes", 15 * passes), grid, tif, path));
+    }
+    for pixel_mm in [0.2, 0.05] {
+        let (grid, tif, path) = run(60.0, pixel_mm);
+        cases.push((format!("60min_{pixel_mm}mm"), grid, tif, path));
+    }
+    for (label, grid, tif, path) in cases {
+        let once = std::time::Instant::now();
+        let _ = FastRemoval::from_field(&tif, &grid)
+            .and_then(|mut f| f.removal(&path, None))
+            .expect("removal");
+        let once_s = once.elapsed().as_secs_f64();
+        eprintln!(
+            "scaling {label}: {:.1} min path, {} samples, {:.0} mm, {}x{} map, one run {once_s:.2} s",
+            path.duration_s() / 60.0,
+            path.len(),
+            path.length_mm(),
+            grid.rows,
+            grid.cols
+        );
+        // Beyond ~5 s per run ten samples would dominate the whole bench; the single run above
+        // is the figure reported then.
+        if once_s > 5.0 {
+            eprintln!("scaling {label}: skipped (single run > 5 s)");
+            continue;
+        }
+        g.bench_function(format!("{label}_with_setup"), |b| {
+            b.iter(|| FastRemoval::from_field(&tif, &grid).and_then(|mut f| f.removal(&path, None)))
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, dwell, removal, removal_scaling);
 criterion_main!(benches);

@@ -2,6 +2,8 @@
 # Side-by-side timing of the spectral workloads: criterion (benches/spectrum.rs, release) and
 # the NumPy / SciPy peer (psd_numpy.py) on the same machine, then a Markdown table of medians
 # and ratios; at 4096 also interleave.py (the two sides alternate, so both see the same load).
+# Last, prysm_peer.py: prysm 0.21.1 against `bonnetlab stats --remove piston,tilt` on the real
+# Zygo files (shared/data/real).
 # Creates its own virtual environment (benches/peers/.venv) on first use.
 # Usage: benches/peers/run.sh [SIZES]   (SIZES default 512,1024,2048,4096)
 set -euo pipefail
@@ -12,7 +14,7 @@ venv="$here/.venv"
 if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv"
     "$venv/bin/pip" install --quiet --upgrade pip
-    "$venv/bin/pip" install --quiet numpy scipy
+    "$venv/bin/pip" install --quiet numpy scipy prysm==0.21.1
 fi
 out="$root/target/peers"
 mkdir -p "$out"
@@ -30,3 +32,6 @@ if [[ ",$sizes," == *",4096,"* ]]; then
     (cd "$root" && cargo build --release -p bonnetlab-spectrum --example time_psd)
     "$venv/bin/python" "$here/interleave.py" "$root/target/release/examples/time_psd" --size 4096
 fi
+echo "== prysm peer: real Zygo files, read + piston/tilt + PV/RMS"
+(cd "$root" && cargo build --release --bin bonnetlab)
+"$venv/bin/python" "$here/prysm_peer.py" "$root/target/release/bonnetlab" "$root/../shared/data/real"
