@@ -292,16 +292,8 @@ impl Convolver {
 
     /// Convolution (or correlation when `adjoint`) into an existing output.
     pub fn run(&mut self, input: ArrayView2<f64>, adjoint: bool, out: &mut Array2<f64>) {
-        let (n0, n1) = self.fft.shape();
-        let (r, c) = (self.rows.min(input.nrows()), self.cols.min(input.ncols()));
-        self.real.iter_mut().for_each(|v| *v = 0.0);
-        for i in 0..r {
-            let dst = &mut self.real[i * n1..i * n1 + c];
-            for (d, s) in dst.iter_mut().zip(input.row(i).iter()) {
-                *d = *s;
-            }
-        }
-        let _ = n0;
+        let n1 = self.fft.shape().1;
+        load_padded(&mut self.real, n1, input, self.rows, self.cols);
         self.fft
             .forward(&mut self.real, &mut self.tmp, &mut self.spec);
         let kh = &self.kernel_hat;
@@ -337,16 +329,7 @@ impl Convolver {
         h: impl Fn(Complex<f64>) -> Complex<f64> + Sync,
     ) -> Array2<f64> {
         let n1 = self.fft.shape().1;
-        let (r, c) = (self.rows.min(input.nrows()), self.cols.min(input.ncols()));
-        self.real.iter_mut().for_each(|v| *v = 0.0);
-        for i in 0..r {
-            for (d, s) in self.real[i * n1..i * n1 + c]
-                .iter_mut()
-                .zip(input.row(i).iter())
-            {
-                *d = *s;
-            }
-        }
+        load_padded(&mut self.real, n1, input, self.rows, self.cols);
         self.fft
             .forward(&mut self.real, &mut self.tmp, &mut self.spec);
         let kh = &self.kernel_hat;
@@ -468,16 +451,7 @@ impl MultiConvolver {
         let mut any = false;
         for (input, kh) in inputs.iter().zip(&self.kernel_hats) {
             let Some(input) = input else { continue };
-            let (r, c) = (self.rows.min(input.nrows()), self.cols.min(input.ncols()));
-            self.real.iter_mut().for_each(|v| *v = 0.0);
-            for i in 0..r {
-                for (d, s) in self.real[i * n1..i * n1 + c]
-                    .iter_mut()
-                    .zip(input.row(i).iter())
-                {
-                    *d = *s;
-                }
-            }
+            load_padded(&mut self.real, n1, *input, self.rows, self.cols);
             self.fft
                 .forward(&mut self.real, &mut self.tmp, &mut self.spec);
             let first = !any;
@@ -535,6 +509,18 @@ pub fn convolve_direct(input: ArrayView2<f64>, kernel: ArrayView2<f64>) -> Array
         }
     }
     out
+}
+
+/// Zero-padded copy of the top-left `rows x cols` of `input` into a row-major buffer of row
+/// length `n1` (the FFT grid); the rest of the buffer is zeroed.
+fn load_padded(real: &mut [f64], n1: usize, input: ArrayView2<f64>, rows: usize, cols: usize) {
+    let (r, c) = (rows.min(input.nrows()), cols.min(input.ncols()));
+    real.iter_mut().for_each(|v| *v = 0.0);
+    for i in 0..r {
+        for (d, s) in real[i * n1..i * n1 + c].iter_mut().zip(input.row(i).iter()) {
+            *d = *s;
+        }
+    }
 }
 
 #[cfg(test)]
