@@ -2,42 +2,11 @@
 //! are both found; effects outside the library's exact forms are reported (as an effect of the
 //! library's generic kinds or as unexplained structure) and the residual falls by at least half.
 
-use bonnetlab::calibrate::model::Problem;
-use bonnetlab::calibrate::run::{calibrate, Calibration, Options};
-use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig, Waveform, WiggleCoord};
-use bonnetlab::calibrate::tif::TifMap;
+mod common;
 
-fn run(effects: Vec<Injected>, seed: u64) -> Calibration {
-    run_cfg(&SynthConfig {
-        effects,
-        seed,
-        ..SynthConfig::default()
-    })
-}
-
-fn run_cfg(cfg: &SynthConfig) -> Calibration {
-    let run = generate(cfg).unwrap();
-    let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).unwrap();
-    let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();
-    calibrate(&p, &Options::default()).unwrap()
-}
-
-fn summary(c: &Calibration) -> String {
-    let k: Vec<String> = c
-        .effects
-        .iter()
-        .map(|e| format!("{} {:?}", e.kind, e.params))
-        .collect();
-    let u: Vec<&str> = c
-        .unexplained
-        .iter()
-        .map(|u| u.description.as_str())
-        .collect();
-    format!(
-        "effects {k:?}, unexplained {u:?}, baseline {:.3} nm, final {:.3} nm, floor {:.3} nm",
-        c.baseline.residual_rms_nm, c.final_.residual_rms_nm, c.noise_floor_rms_nm
-    )
-}
+use bonnetlab::calibrate::run::Calibration;
+use bonnetlab::calibrate::synth::{Injected, SynthConfig, Waveform, WiggleCoord};
+use common::calibrate::{param, run, run_cfg, summary};
 
 #[test]
 fn noise_only_accepts_no_effect() {
@@ -102,16 +71,6 @@ fn drift_and_misregistration_are_both_found() {
         "{}",
         summary(&c)
     );
-}
-
-fn param(c: &Calibration, kind: &str, name: &str) -> f64 {
-    c.effects
-        .iter()
-        .find(|e| e.kind == kind)
-        .unwrap_or_else(|| panic!("{kind} not found: {}", summary(c)))
-        .params[name]
-        .as_f64()
-        .unwrap()
 }
 
 /// Three at once (drift, lag, misregistration with rotation): exactly these three, each within
