@@ -222,16 +222,22 @@ pub fn dwell_maps_by_motion(
 
 /// Adds `w` in column `j` at fractional row `u` with 4 Keys cubic weights along the column only.
 fn splat_cubic_col(d: &mut Array2<f64>, u: f64, j: isize, w: f64) {
-    let (r, c) = d.dim();
-    if j < 0 || j as usize >= c || !(u > -2.0 && u < r as f64 + 1.0) {
+    if j >= 0 && (j as usize) < d.ncols() {
+        splat_cubic_lane(d.column_mut(j as usize), u, w);
+    }
+}
+
+/// Adds `w` at fractional position `u` of a lane with 4 Keys cubic weights (outside: nothing).
+fn splat_cubic_lane(mut lane: ndarray::ArrayViewMut1<f64>, u: f64, w: f64) {
+    let n = lane.len();
+    if !(u > -2.0 && u < n as f64 + 1.0) {
         return;
     }
     let i0 = u.floor() as isize;
-    let mut col = d.column_mut(j as usize);
     for (a, wi) in keys_weights(u - i0 as f64).iter().enumerate() {
         let i = i0 - 1 + a as isize;
-        if i >= 0 && (i as usize) < r {
-            col[i as usize] += w * wi;
+        if i >= 0 && (i as usize) < n {
+            lane[i as usize] += w * wi;
         }
     }
 }
@@ -243,17 +249,8 @@ fn map_mut(maps: &mut [Option<Array2<f64>>], k: usize, dim: (usize, usize)) -> &
 
 /// Adds `w` on row `i` at fractional column `v` with 4 Keys cubic weights along the row only.
 fn splat_cubic_row(d: &mut Array2<f64>, i: isize, v: f64, w: f64) {
-    let (r, c) = d.dim();
-    if i < 0 || i as usize >= r || !(v > -2.0 && v < c as f64 + 1.0) {
-        return;
-    }
-    let j0 = v.floor() as isize;
-    let mut row = d.row_mut(i as usize);
-    for (b, wj) in keys_weights(v - j0 as f64).iter().enumerate() {
-        let j = j0 - 1 + b as isize;
-        if j >= 0 && (j as usize) < c {
-            row[j as usize] += w * wj;
-        }
+    if i >= 0 && (i as usize) < d.nrows() {
+        splat_cubic_lane(d.row_mut(i as usize), v, w);
     }
 }
 
