@@ -9,6 +9,7 @@ pub mod dwell;
 pub mod error;
 pub mod fft;
 pub mod grid;
+pub mod interp;
 pub mod path;
 pub mod recipe;
 pub mod removal;

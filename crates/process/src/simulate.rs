@@ -15,7 +15,7 @@ use crate::path::PathLog;
 use crate::recipe::TifSource;
 use crate::removal::{deposit_exact, ExactOptions, FastRemoval};
 use crate::tif::bonnet::BonnetTif;
-use crate::tif::measured::{tif_from_spot, SpotOptions};
+use crate::tif::measured::{MeasuredTif, SpotOptions};
 use crate::tif::{RateField, Tif};
 
 /// How the removal is computed.
@@ -30,6 +30,8 @@ pub enum Mode {
 /// A TIF ready for simulation: sampled at the map pitch, and the field exact deposition uses.
 pub enum ToolModel {
     Sampled(Tif),
+    /// A measured spot: the field at the spot's own pixel, and its samples at the map pitch.
+    Measured(Tif, Box<MeasuredTif>),
     Gaussian(Tif, crate::tif::GaussianTif),
     Bonnet(Tif, Box<BonnetTif>),
 }
@@ -47,11 +49,8 @@ impl ToolModel {
             TifSource::Spot { dwell_s, .. } => {
                 let s =
                     spot.ok_or_else(|| ProcessError::invalid("a measured TIF needs its spot map"))?;
-                let o = SpotOptions {
-                    pixel_mm: Some((dx_mm, dy_mm)),
-                    ..SpotOptions::default()
-                };
-                ToolModel::Sampled(tif_from_spot(s, *dwell_s, &o)?)
+                let m = MeasuredTif::from_spot(s, *dwell_s, &SpotOptions::default())?;
+                ToolModel::Measured(Tif::sample(&m, dx_mm, dy_mm)?, Box::new(m))
             }
             TifSource::Gaussian(g) => {
                 ToolModel::Gaussian(Tif::sample_antialiased(g, dx_mm, dy_mm)?, *g)
@@ -75,7 +74,10 @@ impl ToolModel {
     /// The TIF sampled at the map pitch.
     pub fn sampled(&self) -> &Tif {
         match self {
-            ToolModel::Sampled(t) | ToolModel::Gaussian(t, _) | ToolModel::Bonnet(t, _) => t,
+            ToolModel::Sampled(t)
+            | ToolModel::Measured(t, _)
+            | ToolModel::Gaussian(t, _)
+            | ToolModel::Bonnet(t, _) => t,
         }
     }
 
@@ -86,6 +88,7 @@ impl ToolModel {
     pub fn fast_removal(&self, grid: &Grid) -> Result<FastRemoval, ProcessError> {
         match self {
             ToolModel::Sampled(t) => FastRemoval::new(t, grid),
+            ToolModel::Measured(_, m) => FastRemoval::from_field(m.as_ref(), grid),
             ToolModel::Gaussian(_, g) => FastRemoval::from_field(g, grid),
             ToolModel::Bonnet(_, b) => FastRemoval::from_field(b.as_ref(), grid),
         }
@@ -95,6 +98,7 @@ impl ToolModel {
     pub fn field(&self) -> &dyn RateField {
         match self {
             ToolModel::Sampled(t) => t,
+            ToolModel::Measured(_, m) => m.as_ref(),
             ToolModel::Gaussian(_, g) => g,
             ToolModel::Bonnet(_, b) => b.as_ref(),
         }

@@ -1,20 +1,28 @@
 //! A TIF measured from a fixed-point spot: a height map of a dip polished for `dwell_s` seconds.
+//! This is the one spot-to-TIF conversion of the project (simulate, calibrate, the vibration
+//! coupling and the reports all use it).
 //!
 //! Steps and conventions:
 //! 1. Background: a plane (piston + tilt) fitted by least squares on the border ring (valid
 //!    pixels within `ring_fraction` of the smaller map side from the edge, at least 2 pixels),
 //!    where the tool never touched; subtracting it removes set-up piston and tilt.
 //! 2. Sign: removal = -(height - background), positive where material was removed.
-//! 3. Centring: the centroid of the removal above 10 % of its maximum (the threshold keeps the
-//!    measurement noise of the flat surround from pulling the centroid).
-//! 4. Rate: removal / dwell_s (nm/s).
-//! 5. Window: the largest disc around the centroid that stays inside the map, resampled
-//!    (bilinear over valid neighbours) onto an odd grid of the target pixel size; the rate is set
-//!    to 0 outside that disc.
+//! 3. Rate: removal / dwell_s (nm/s), kept at the spot map's own pixel: a spot measured finer
+//!    than the map is never resampled down first ([`MeasuredTif`] is a continuous field).
+//! 4. Centre (the tool centre is taken as the removal centroid): the centroid of the removal
+//!    above 10 % of its maximum gives a first estimate; it is then refined without threshold as
+//!    the centroid of the whole removal inside a disc reaching past the footprint (the rim and
+//!    the noisy surround included, so no pixel enters or leaves a threshold set with the
+//!    sub-pixel position: no recentring bias for a point-symmetric footprint).
+//! 5. Support: the footprint radius is where the azimuthal mean of the rate falls below 0.2 %
+//!    of the peak (noise beyond it is not removal); the rate is 0 beyond 1.1 times that radius
+//!    plus one spot pixel, and never beyond the largest disc inside the map.
+//! 6. Interpolation between spot pixels: Catmull-Rom bicubic (exact at the pixels, third order
+//!    between them), over valid pixels (invalid neighbours replaced by the bilinear estimate).
 
 use ndarray::Array2;
 
-use super::Tif;
+use super::{RateField, Tif};
 use crate::error::ProcessError;
 use bonnetlab_surface::Surface;
 
@@ -46,23 +54,166 @@ impl Tif {
     }
 }
 
-/// The removal-rate TIF of a measured spot; see the module docs for the steps.
-pub fn tif_from_spot(spot: &Surface, dwell_s: f64, o: &SpotOptions) -> Result<Tif, ProcessError> {
-    if !(dwell_s.is_finite() && dwell_s > 0.0) {
-        return Err(ProcessError::invalid(format!(
-            "spot dwell_s must be positive, got {dwell_s}"
-        )));
+/// Upsampling factor of a measured spot's samples.
+const UPSAMPLE: usize = 4;
+/// Largest upsampled spot array (samples).
+const MAX_UPSAMPLED: usize = 2048 * 2048;
+
+/// The removal rate of a measured spot as a continuous field at the spot's own resolution,
+/// centred on its removal centroid (see the module docs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasuredTif {
+    /// Rate (nm/s) on the spot map's pixels; invalid pixels already filled.
+    rate: Array2<f64>,
+    dx_mm: f64,
+    dy_mm: f64,
+    /// Fractional (row, column) of the tool centre in `rate`.
+    centre: (f64, f64),
+    /// Beyond this distance from the centre the rate is 0 (mm).
+    radius_mm: f64,
+}
+
+impl MeasuredTif {
+    /// The field of a measured spot polished for `dwell_s` seconds.
+    pub fn from_spot(
+        spot: &Surface,
+        dwell_s: f64,
+        o: &SpotOptions,
+    ) -> Result<MeasuredTif, ProcessError> {
+        if !(dwell_s.is_finite() && dwell_s > 0.0) {
+            return Err(ProcessError::invalid(format!(
+                "spot dwell_s must be positive, got {dwell_s}"
+            )));
+        }
+        let (dx, dy) = spot.pixel_mm("a measured TIF")?;
+        let (rows, cols) = spot.dim();
+        if rows < 5 || cols < 5 {
+            return Err(ProcessError::invalid(format!(
+                "spot map {rows} x {cols} is too small"
+            )));
+        }
+        let valid = spot.valid();
+        let removal = background_removed(spot, o.ring_fraction)?;
+        let peak = removal
+            .indexed_iter()
+            .filter(|(ij, _)| valid[*ij])
+            .fold(0.0f64, |m, (_, &v)| m.max(v));
+        if peak <= 0.0 {
+            return Err(ProcessError::Processing(
+                "spot map: no removal found (no dip below the border ring)".into(),
+            ));
+        }
+        // First centre: centroid above 10 % of the peak.
+        let (mut s, mut si, mut sj) = (0.0, 0.0, 0.0);
+        for ((i, j), &v) in removal.indexed_iter() {
+            if valid[(i, j)] && v > 0.1 * peak {
+                s += v;
+                si += v * i as f64;
+                sj += v * j as f64;
+            }
+        }
+        let (mut u0, mut v0) = (si / s, sj / s);
+        let room = |u: f64, v: f64| {
+            (v.min(cols as f64 - 1.0 - v) * dx).min(u.min(rows as f64 - 1.0 - u) * dy)
+        };
+        let rate = fill_invalid(&removal.mapv(|r| r / dwell_s), valid);
+        let support = support_radius_mm(&rate, (u0, v0), dx, dy, 0.002);
+        // Refine: threshold-free centroid inside a disc past the footprint.
+        for _ in 0..3 {
+            let r_win = (1.3 * support + 2.0 * dx.max(dy)).min(room(u0, v0));
+            let (mut s, mut si, mut sj) = (0.0, 0.0, 0.0);
+            for ((i, j), &v) in rate.indexed_iter() {
+                let (ox, oy) = ((j as f64 - v0) * dx, (i as f64 - u0) * dy);
+                if ox * ox + oy * oy <= r_win * r_win {
+                    s += v;
+                    si += v * i as f64;
+                    sj += v * j as f64;
+                }
+            }
+            if s <= 0.0 {
+                break;
+            }
+            let (nu, nv) = (si / s, sj / s);
+            let moved = (nu - u0).abs() + (nv - v0).abs();
+            (u0, v0) = (nu, nv);
+            if moved < 1e-6 {
+                break;
+            }
+        }
+        let mut radius = (1.1 * support + dx.max(dy)).min(room(u0, v0));
+        if let Some(m) = o.max_radius_mm {
+            radius = radius.min(m);
+        }
+        if radius < dx.max(dy) {
+            return Err(ProcessError::Processing(
+                "spot map: the spot touches the map border".into(),
+            ));
+        }
+        // A box of odd size around the footprint, band-limited upsampling to a quarter of the
+        // spot pixel (a coarse spot of a smooth footprint is then interpolated almost exactly;
+        // see interp::fourier_upsample), then Catmull-Rom between the fine samples.
+        let (ci, cj) = (u0.round() as isize, v0.round() as isize);
+        let (h0, h1) = (
+            (radius / dy).ceil() as isize + 4,
+            (radius / dx).ceil() as isize + 4,
+        );
+        let cropped =
+            Array2::from_shape_fn((2 * h0 as usize + 1, 2 * h1 as usize + 1), |(a, b)| {
+                let (i, j) = (ci - h0 + a as isize, cj - h1 + b as isize);
+                if i >= 0 && j >= 0 && (i as usize) < rows && (j as usize) < cols {
+                    rate[(i as usize, j as usize)]
+                } else {
+                    0.0
+                }
+            });
+        let (n0, n1) = cropped.dim();
+        let factor = (1..=UPSAMPLE)
+            .rev()
+            .find(|f| n0 * n1 * f * f <= MAX_UPSAMPLED)
+            .unwrap_or(1);
+        let fine = crate::interp::fourier_upsample(&cropped, factor);
+        let f = factor as f64;
+        Ok(MeasuredTif {
+            rate: fine,
+            dx_mm: dx / f,
+            dy_mm: dy / f,
+            centre: ((u0 - (ci - h0) as f64) * f, (v0 - (cj - h1) as f64) * f),
+            radius_mm: radius,
+        })
     }
-    let (dx, dy) = spot.pixel_mm("a measured TIF")?;
+
+    /// The pixel (dx, dy) in mm of the field's samples (the spot's pixel over the upsampling).
+    pub fn pixel_mm(&self) -> (f64, f64) {
+        (self.dx_mm, self.dy_mm)
+    }
+
+    /// Radius beyond which the rate is 0, mm.
+    pub fn radius_mm(&self) -> f64 {
+        self.radius_mm
+    }
+}
+
+impl RateField for MeasuredTif {
+    fn rate_at_mm(&self, dx_mm: f64, dy_mm: f64) -> f64 {
+        if dx_mm * dx_mm + dy_mm * dy_mm > self.radius_mm * self.radius_mm {
+            return 0.0;
+        }
+        let u = self.centre.0 + dy_mm / self.dy_mm;
+        let v = self.centre.1 + dx_mm / self.dx_mm;
+        crate::interp::catmull_rom(&self.rate, u, v)
+    }
+
+    fn half_extent_mm(&self) -> (f64, f64) {
+        (self.radius_mm, self.radius_mm)
+    }
+}
+
+/// Removal (nm, positive = removed) of a spot map after the border-ring plane.
+fn background_removed(spot: &Surface, ring_fraction: f64) -> Result<Array2<f64>, ProcessError> {
     let (rows, cols) = spot.dim();
-    if rows < 5 || cols < 5 {
-        return Err(ProcessError::invalid(format!(
-            "spot map {rows} x {cols} is too small"
-        )));
-    }
     let h = spot.heights_nm();
     let valid = spot.valid();
-    let ring = ((rows.min(cols) as f64 * o.ring_fraction).round() as usize).max(2);
+    let ring = ((rows.min(cols) as f64 * ring_fraction).round() as usize).max(2);
     let in_ring = |i: usize, j: usize| i < ring || j < ring || i + ring >= rows || j + ring >= cols;
     // Plane fit on the ring: normal equations of [1, x, y] in pixel units (centred).
     let (ci, cj) = (rows as f64 / 2.0, cols as f64 / 2.0);
@@ -87,92 +238,107 @@ pub fn tif_from_spot(spot: &Surface, dwell_s: f64, o: &SpotOptions) -> Result<Ti
         ));
     }
     let coef = solve3(ata, atb).unwrap_or([atb[0] / n_ring as f64, 0.0, 0.0]);
-    let removal = Array2::from_shape_fn((rows, cols), |(i, j)| {
+    Ok(Array2::from_shape_fn((rows, cols), |(i, j)| {
         if valid[(i, j)] {
             -(h[(i, j)] - coef[0] - coef[1] * (j as f64 - cj) - coef[2] * (i as f64 - ci))
         } else {
             0.0
         }
-    });
-    let peak = removal
-        .indexed_iter()
-        .filter(|(ij, _)| valid[*ij])
-        .fold(0.0f64, |m, (_, &v)| m.max(v));
-    if peak <= 0.0 {
-        return Err(ProcessError::Processing(
-            "spot map: no removal found (no dip below the border ring)".into(),
-        ));
-    }
-    let (mut s, mut si, mut sj) = (0.0, 0.0, 0.0);
-    for ((i, j), &v) in removal.indexed_iter() {
-        if valid[(i, j)] && v > 0.1 * peak {
-            s += v;
-            si += v * i as f64;
-            sj += v * j as f64;
+    }))
+}
+
+/// Invalid pixels replaced by the mean of their valid 8-neighbours, repeated until none is left
+/// (a dropout inside the footprint becomes a smooth patch, not a hole of zero rate).
+fn fill_invalid(a: &Array2<f64>, valid: &Array2<bool>) -> Array2<f64> {
+    let mut out = a.clone();
+    let mut known = valid.clone();
+    let (r, c) = a.dim();
+    for _ in 0..r.max(c) {
+        let mut changed = Vec::new();
+        for i in 0..r {
+            for j in 0..c {
+                if known[(i, j)] {
+                    continue;
+                }
+                let (mut s, mut n) = (0.0, 0);
+                for di in -1isize..=1 {
+                    for dj in -1isize..=1 {
+                        let (ii, jj) = (i as isize + di, j as isize + dj);
+                        if ii >= 0 && jj >= 0 && (ii as usize) < r && (jj as usize) < c {
+                            let (ii, jj) = (ii as usize, jj as usize);
+                            if known[(ii, jj)] {
+                                s += out[(ii, jj)];
+                                n += 1;
+                            }
+                        }
+                    }
+                }
+                if n > 0 {
+                    changed.push((i, j, s / n as f64));
+                }
+            }
+        }
+        if changed.is_empty() {
+            break;
+        }
+        for (i, j, v) in changed {
+            out[(i, j)] = v;
+            known[(i, j)] = true;
         }
     }
-    let (u0, v0) = (si / s, sj / s);
-    let x_room = (v0.min(cols as f64 - 1.0 - v0)) * dx;
-    let y_room = (u0.min(rows as f64 - 1.0 - u0)) * dy;
-    let mut radius = x_room.min(y_room);
-    if let Some(m) = o.max_radius_mm {
-        radius = radius.min(m);
+    out
+}
+
+/// Radius (mm) of the footprint: the outer edge of the last one-pixel annulus around `centre`
+/// whose mean rate exceeds `frac` of the peak, searched outwards until four annuli in a row
+/// fall below it (noise far out does not count).
+fn support_radius_mm(rate: &Array2<f64>, centre: (f64, f64), dx: f64, dy: f64, frac: f64) -> f64 {
+    let (r, c) = rate.dim();
+    let d = dx.min(dy);
+    let nb = ((r as f64 * dy).hypot(c as f64 * dx) / d) as usize + 2;
+    let (mut sum, mut cnt) = (vec![0.0f64; nb], vec![0usize; nb]);
+    let mut peak = 0.0f64;
+    for ((i, j), &v) in rate.indexed_iter() {
+        let b = (((j as f64 - centre.1) * dx).hypot((i as f64 - centre.0) * dy) / d) as usize;
+        if b < nb {
+            sum[b] += v;
+            cnt[b] += 1;
+        }
+        peak = peak.max(v);
     }
+    let mut last = 0;
+    for b in 0..nb {
+        if cnt[b] > 0 && sum[b] / cnt[b] as f64 > frac * peak {
+            last = b;
+        } else if cnt[b] > 0 && b > last + 3 {
+            break;
+        }
+    }
+    (last as f64 + 1.0) * d
+}
+
+/// The removal-rate TIF of a measured spot, sampled at `o.pixel_mm` (default: the spot's own
+/// pixel) from its [`MeasuredTif`] field; see the module docs for the steps.
+pub fn tif_from_spot(spot: &Surface, dwell_s: f64, o: &SpotOptions) -> Result<Tif, ProcessError> {
+    let field = MeasuredTif::from_spot(spot, dwell_s, o)?;
+    let (dx, dy) = spot.pixel_mm("a measured TIF")?;
     let (tdx, tdy) = o.pixel_mm.unwrap_or((dx, dy));
     if !(tdx > 0.0 && tdy > 0.0 && tdx.is_finite() && tdy.is_finite()) {
         return Err(ProcessError::invalid(
             "target TIF pixel size must be positive",
         ));
     }
-    let h1 = (radius / tdx).floor() as usize;
-    let h0 = (radius / tdy).floor() as usize;
-    if h0 == 0 || h1 == 0 {
-        return Err(ProcessError::Processing(
-            "spot map: the spot touches the map border".into(),
-        ));
-    }
+    let (rows, cols) = spot.dim();
+    let (h0, h1) = (
+        (field.radius_mm / tdy).floor() as usize,
+        (field.radius_mm / tdx).floor() as usize,
+    );
     if (2 * h0 + 1) * (2 * h1 + 1) > 4 * rows * cols + 64 * 64 {
         return Err(ProcessError::invalid(
             "target TIF pixel is far finer than the spot map",
         ));
     }
-    let rate = Array2::from_shape_fn((2 * h0 + 1, 2 * h1 + 1), |(a, b)| {
-        let ox = (b as f64 - h1 as f64) * tdx;
-        let oy = (a as f64 - h0 as f64) * tdy;
-        if ox * ox + oy * oy > radius * radius {
-            return 0.0;
-        }
-        bilinear_valid(&removal, valid, u0 + oy / dy, v0 + ox / dx) / dwell_s
-    });
-    Tif::new(rate, tdx, tdy)
-}
-
-/// Bilinear interpolation using only valid neighbours (weights renormalised); 0 if none.
-fn bilinear_valid(a: &Array2<f64>, valid: &Array2<bool>, u: f64, v: f64) -> f64 {
-    let (r, c) = a.dim();
-    if u < 0.0 || v < 0.0 {
-        return 0.0;
-    }
-    let (i, j) = (u.floor() as usize, v.floor() as usize);
-    let (fu, fv) = (u - i as f64, v - j as f64);
-    let mut s = 0.0;
-    let mut w = 0.0;
-    for (ii, jj, ww) in [
-        (i, j, (1.0 - fu) * (1.0 - fv)),
-        (i, j + 1, (1.0 - fu) * fv),
-        (i + 1, j, fu * (1.0 - fv)),
-        (i + 1, j + 1, fu * fv),
-    ] {
-        if ii < r && jj < c && valid[(ii, jj)] && ww > 0.0 {
-            s += ww * a[(ii, jj)];
-            w += ww;
-        }
-    }
-    if w > 1e-12 {
-        s / w
-    } else {
-        0.0
-    }
+    Tif::sample(&field, tdx, tdy)
 }
 
 /// Solves a 3x3 system by Cramer's rule; `None` when singular.

@@ -273,21 +273,7 @@ impl RateField for Tif {
     }
 }
 
-/// Bilinear interpolation of `a` at fractional (row u, col v); 0 outside.
-pub(crate) fn bilinear(a: &Array2<f64>, u: f64, v: f64) -> f64 {
-    let (r, c) = a.dim();
-    if !(u.is_finite() && v.is_finite()) || u < 0.0 || v < 0.0 {
-        return 0.0;
-    }
-    let (i, j) = (u.floor() as usize, v.floor() as usize);
-    if i >= r || j >= c {
-        return 0.0;
-    }
-    let (fu, fv) = (u - i as f64, v - j as f64);
-    let at = |ii: usize, jj: usize| if ii < r && jj < c { a[(ii, jj)] } else { 0.0 };
-    (1.0 - fu) * ((1.0 - fv) * at(i, j) + fv * at(i, j + 1))
-        + fu * ((1.0 - fv) * at(i + 1, j) + fv * at(i + 1, j + 1))
-}
+pub(crate) use crate::interp::bilinear;
 
 #[cfg(test)]
 mod tests {
