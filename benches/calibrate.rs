@@ -6,10 +6,8 @@
 //!
 //! `cargo bench --bench calibrate`
 
-use bonnetlab::calibrate::model::Problem;
 use bonnetlab::calibrate::run::{calibrate, Options};
 use bonnetlab::calibrate::synth::{generate, SynthConfig, SynthRun};
-use bonnetlab::calibrate::tif::TifMap;
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn make(n: usize) -> SynthRun {
@@ -21,10 +19,16 @@ fn bench(c: &mut Criterion) {
     g.sample_size(10);
     for n in [400usize, 800] {
         let run = make(n);
-        let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).expect("tif");
         g.bench_function(format!("{n}x{n}_full_library"), |b| {
             b.iter(|| {
-                let p = Problem::new(&run.before, &run.after, &tif, &run.path).expect("problem");
+                let p = bonnetlab::calibrate::pipeline::problem_with_spot(
+                    &run.before,
+                    &run.after,
+                    &run.spot,
+                    run.spot_dwell_s,
+                    &run.path,
+                )
+                .expect("problem");
                 let cal = calibrate(&p, &Options::default()).expect("calibration");
                 assert_eq!(cal.effects.len(), 2);
                 cal

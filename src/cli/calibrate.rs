@@ -9,13 +9,8 @@
 use std::path::{Path, PathBuf};
 
 use bonnetlab_calibrate::model::Problem;
-use bonnetlab_calibrate::path::PathLog;
 use bonnetlab_calibrate::psd::psd_1d;
 use bonnetlab_calibrate::run::{calibrate, Calibration, Options};
-use bonnetlab_calibrate::tif::TifMap;
-use bonnetlab_calibrate::CalibrateError;
-use bonnetlab_process::recipe::{Recipe, TifSource};
-use bonnetlab_process::tif::Tif;
 use bonnetlab_surface::Surface;
 use ndarray::Array2;
 
@@ -36,46 +31,15 @@ pub struct Args {
     pub out: Option<PathBuf>,
 }
 
-fn read_map(path: &Path) -> Result<Surface, CliError> {
-    bonnetlab_io::read_surface(path).map_err(|e| CliError {
-        code: e.exit_code(),
-        message: e.to_string(),
-    })
-}
-
-/// Loads the run and returns the prepared problem.
+/// Loads the run and returns the prepared problem (the library's pipeline).
 pub fn load(recipe_path: &Path) -> Result<Problem, CliError> {
-    let recipe = Recipe::load(recipe_path).map_err(|e| CliError::input(recipe_path, e))?;
-    let before = read_map(&recipe.before)?;
-    let after_path = recipe.after.clone().ok_or_else(|| {
-        CliError::input(
-            recipe_path,
-            "[measurement] after: missing (calibrate needs the after map)",
-        )
-    })?;
-    let after = read_map(&after_path)?;
-    let (dx, dy) = before
-        .pixel_mm("calibration")
-        .map_err(|e| CliError::input(&recipe.before, e))?;
-    let tif = match &recipe.tif {
-        TifSource::Spot { path, dwell_s } => {
-            let spot = read_map(path)?;
-            Tif::from_spot(&spot, *dwell_s).map_err(|e| CliError::input(path, e))?
-        }
-        TifSource::Gaussian(g) => Tif::sample(g, dx, dy)
-            .map_err(|e| CliError::input(recipe_path, format!("[tif] model: {e}")))?,
-        TifSource::Bonnet(b) => Tif::bonnet(b, dx, dy)
-            .map_err(|e| CliError::input(recipe_path, format!("[tif] model: {e}")))?,
-    };
-    let tif = TifMap::new(tif.rate_nm_per_s, tif.dx_mm, tif.dy_mm)
-        .map_err(|e| CliError::input(recipe_path, format!("[tif]: {e}")))?;
-    let log = bonnetlab_process::path::read_path_csv(&recipe.path_log)
-        .map_err(|e| CliError::input(&recipe.path_log, e))?;
-    let path = PathLog::new(log.t_s, log.x_mm, log.y_mm)
-        .map_err(|e| CliError::input(&recipe.path_log, e))?;
-    Problem::new(&before, &after, &tif, &path).map_err(|e| match e {
-        CalibrateError::Processing(m) => CliError::processing(recipe_path, m),
-        other => CliError::input(recipe_path, other),
+    bonnetlab_calibrate::pipeline::load_recipe(recipe_path).map_err(|e| match e.exit_code {
+        1 => CliError::processing(&e.file, e.message),
+        _ if e.message.starts_with(&*e.file.to_string_lossy()) => CliError {
+            code: e.exit_code,
+            message: e.message,
+        },
+        _ => CliError::input(&e.file, e.message),
     })
 }
 

@@ -2,10 +2,8 @@
 //! deposition, independent of the calibration's FFT model), calibrate it, and describe the
 //! outcome for assertion messages.
 
-use bonnetlab::calibrate::model::Problem;
 use bonnetlab::calibrate::run::{calibrate, Calibration, Options};
 use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig};
-use bonnetlab::calibrate::tif::TifMap;
 
 /// Calibrates a default-size run with these undeclared effects.
 pub fn run(effects: Vec<Injected>, seed: u64) -> Calibration {
@@ -19,8 +17,14 @@ pub fn run(effects: Vec<Injected>, seed: u64) -> Calibration {
 /// Calibrates a run generated from `cfg`.
 pub fn run_cfg(cfg: &SynthConfig) -> Calibration {
     let run = generate(cfg).unwrap();
-    let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).unwrap();
-    let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();
+    let p = bonnetlab::calibrate::pipeline::problem_with_spot(
+        &run.before,
+        &run.after,
+        &run.spot,
+        run.spot_dwell_s,
+        &run.path,
+    )
+    .unwrap();
     calibrate(&p, &Options::default()).unwrap()
 }
 

@@ -4,10 +4,8 @@
 //! NOISE (nm), APERTURE (disc diameter, mm), SAMPLE_HZ (path log rate), WRITE (also write the run
 //! directory there, for the CLI), BONNETLAB_TRACE (timings per round). Prints the
 //! effects found, each round's best candidates and the timings to stderr, the JSON to stdout.
-use bonnetlab_calibrate::model::Problem;
 use bonnetlab_calibrate::run::{calibrate, Options};
 use bonnetlab_calibrate::synth::{generate, Injected, SynthConfig, Waveform, WiggleCoord};
-use bonnetlab_calibrate::tif::TifMap;
 
 fn main() {
     let which = std::env::args().nth(1).unwrap_or_else(|| "none".into());
@@ -123,8 +121,14 @@ fn main() {
         eprintln!("wrote {}", recipe.display());
     }
     let t = std::time::Instant::now();
-    let tif = TifMap::from_spot(&run.spot, run.spot_dwell_s).unwrap();
-    let p = Problem::new(&run.before, &run.after, &tif, &run.path).unwrap();
+    let p = bonnetlab_calibrate::pipeline::problem_with_spot(
+        &run.before,
+        &run.after,
+        &run.spot,
+        run.spot_dwell_s,
+        &run.path,
+    )
+    .unwrap();
     let c = calibrate(&p, &Options::default()).unwrap();
     eprintln!("calibrate {:?}", t.elapsed());
     eprintln!(

@@ -13,4 +13,6 @@ pub enum CalibrateError {
     Processing(String),
     #[error(transparent)]
     Surface(#[from] SurfaceError),
+    #[error(transparent)]
+    Process(#[from] bonnetlab_process::ProcessError),
 }

@@ -12,6 +12,7 @@ pub mod effects;
 pub mod lsq;
 pub mod model;
 pub mod noise;
+pub mod pipeline;
 pub mod psd;
 pub mod refine;
 pub mod resample;

@@ -184,9 +184,9 @@ impl Problem {
             ));
         }
         let radius = tif
-            .support_radius_mm(0.005)
+            .support_radius_mm()
             .max(2.0 * grid.dx_mm.max(grid.dy_mm));
-        let tif = tif.cropped_to_radius(radius * 1.1);
+        let tif = tif.clone();
         let hr = ((MAX_SCALE * radius * 1.1) / grid.dy_mm).ceil() as usize + 1;
         let hc = ((MAX_SCALE * radius * 1.1) / grid.dx_mm).ceil() as usize + 1;
         let conv = Convolver::new(grid.rows, grid.cols, hr, hc);

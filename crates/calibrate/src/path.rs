@@ -6,62 +6,8 @@
 //! `max_step_mm`; a sub-step is represented by its midpoint, its duration `dt_s`, its unit travel
 //! direction and its feed.
 
-use crate::error::CalibrateError;
-
-/// Commanded tool-centre positions in the map frame (mm), sampled at times `t_s`.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct PathLog {
-    pub t_s: Vec<f64>,
-    pub x_mm: Vec<f64>,
-    pub y_mm: Vec<f64>,
-}
-
-impl PathLog {
-    /// Checks lengths, finiteness and strictly increasing time.
-    pub fn new(t_s: Vec<f64>, x_mm: Vec<f64>, y_mm: Vec<f64>) -> Result<Self, CalibrateError> {
-        if t_s.len() != x_mm.len() || t_s.len() != y_mm.len() {
-            return Err(CalibrateError::InvalidInput(format!(
-                "path columns differ in length ({}, {}, {})",
-                t_s.len(),
-                x_mm.len(),
-                y_mm.len()
-            )));
-        }
-        if t_s.len() < 2 {
-            return Err(CalibrateError::InvalidInput(
-                "the path log needs at least 2 samples".into(),
-            ));
-        }
-        for (k, ((t, x), y)) in t_s.iter().zip(&x_mm).zip(&y_mm).enumerate() {
-            if !(t.is_finite() && x.is_finite() && y.is_finite()) {
-                return Err(CalibrateError::InvalidInput(format!(
-                    "path sample {k} is not a finite number"
-                )));
-            }
-            if k > 0 && *t <= t_s[k - 1] {
-                return Err(CalibrateError::InvalidInput(format!(
-                    "path time is not increasing at sample {k} (t_s = {t})"
-                )));
-            }
-        }
-        Ok(PathLog { t_s, x_mm, y_mm })
-    }
-
-    pub fn len(&self) -> usize {
-        self.t_s.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.t_s.is_empty()
-    }
-
-    pub fn duration_s(&self) -> f64 {
-        match (self.t_s.first(), self.t_s.last()) {
-            (Some(a), Some(b)) => b - a,
-            _ => 0.0,
-        }
-    }
-}
+/// Commanded tool-centre positions in the map frame (mm): the process crate's path type.
+pub use bonnetlab_process::PathLog;
 
 /// Sub-steps of the commanded path (midpoints).
 #[derive(Debug, Clone, Default)]

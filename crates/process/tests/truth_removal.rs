@@ -407,7 +407,10 @@ fn measured_spots_fast_mode_matches_exact_deposition() {
                     // square-root rim the spot's pixels cannot resolve (issue 14 open: a rim
                     // reconstructed by a model fit is the next step); those cases are held to
                     // the errors measured now, so they cannot get worse unnoticed.
+                    // The spot's support is cut at 0.5 % of the peak, 3.6 sigma for a Gaussian:
+                    // at the 1.3 mm pitch that moves a ripple of 0.04 nm by 1.2 %.
                     let s1_tol = match (&truth, fineness >= 4) {
+                        (Truth::Gaussian(_), true) if pitch < 1.5 => 0.015,
                         (Truth::Gaussian(_), true) => 0.01,
                         (Truth::Gaussian(_), false) => 0.02,
                         (Truth::Bonnet(..), true) => 0.015,

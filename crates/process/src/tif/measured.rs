@@ -14,9 +14,13 @@
 //!    the centroid of the whole removal inside a disc reaching past the footprint (the rim and
 //!    the noisy surround included, so no pixel enters or leaves a threshold set with the
 //!    sub-pixel position: no recentring bias for a point-symmetric footprint).
-//! 5. Support: the footprint radius is where the azimuthal mean of the rate falls below 0.2 %
-//!    of the peak (noise beyond it is not removal); the rate is 0 beyond 1.1 times that radius
-//!    plus one spot pixel, and never beyond the largest disc inside the map.
+//! 5. Support: the footprint radius is where the azimuthal mean of the rate no longer stands out
+//!    of the measurement noise (three standard errors of an annulus mean, the noise taken from
+//!    the border ring) or falls below 0.5 % of the peak (a lower floor lets calibrate accept a
+//!    spurious feed covariate on null runs; see the truth suite for what it costs); noise beyond it is not removal (a
+//!    noisy footprint convolved with the dwell would print the noise as a dwell-shaped
+//!    pattern). The rate is 0 beyond 1.1 times that radius plus one spot pixel, and never
+//!    beyond the largest disc inside the map.
 //! 6. Interpolation between spot pixels: Catmull-Rom bicubic (exact at the pixels, third order
 //!    between them), over valid pixels (invalid neighbours replaced by the bilinear estimate).
 
@@ -117,7 +121,8 @@ impl MeasuredTif {
             (v.min(cols as f64 - 1.0 - v) * dx).min(u.min(rows as f64 - 1.0 - u) * dy)
         };
         let rate = fill_invalid(&removal.mapv(|r| r / dwell_s), valid);
-        let support = support_radius_mm(&rate, (u0, v0), dx, dy, 0.002);
+        let noise = ring_noise_rms(&removal, valid, o.ring_fraction) / dwell_s;
+        let support = support_radius_mm(&rate, (u0, v0), dx, dy, noise);
         // Refine: threshold-free centroid inside a disc past the footprint.
         for _ in 0..3 {
             let r_win = (1.3 * support + 2.0 * dx.max(dy)).min(room(u0, v0));
@@ -289,10 +294,38 @@ fn fill_invalid(a: &Array2<f64>, valid: &Array2<bool>) -> Array2<f64> {
     out
 }
 
+/// RMS of the background-removed heights on the border ring (the measurement noise, nm).
+fn ring_noise_rms(removal: &Array2<f64>, valid: &Array2<bool>, ring_fraction: f64) -> f64 {
+    let (rows, cols) = removal.dim();
+    let ring = ((rows.min(cols) as f64 * ring_fraction).round() as usize).max(2);
+    let (mut s2, mut n) = (0.0, 0usize);
+    for ((i, j), &v) in removal.indexed_iter() {
+        if valid[(i, j)] && (i < ring || j < ring || i + ring >= rows || j + ring >= cols) {
+            s2 += v * v;
+            n += 1;
+        }
+    }
+    if n > 0 {
+        (s2 / n as f64).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// Fraction of the peak below which an annulus is no longer footprint, even without noise.
+const SUPPORT_FLOOR: f64 = 5e-3;
+
 /// Radius (mm) of the footprint: the outer edge of the last one-pixel annulus around `centre`
-/// whose mean rate exceeds `frac` of the peak, searched outwards until four annuli in a row
-/// fall below it (noise far out does not count).
-fn support_radius_mm(rate: &Array2<f64>, centre: (f64, f64), dx: f64, dy: f64, frac: f64) -> f64 {
+/// whose mean rate stands out of the noise (above three standard errors of an annulus mean of
+/// pixels with noise `noise_rate`, nm/s) and above [`SUPPORT_FLOOR`] of the peak, searched
+/// outwards until four annuli in a row fall below (noise far out does not count).
+fn support_radius_mm(
+    rate: &Array2<f64>,
+    centre: (f64, f64),
+    dx: f64,
+    dy: f64,
+    noise_rate: f64,
+) -> f64 {
     let (r, c) = rate.dim();
     let d = dx.min(dy);
     let nb = ((r as f64 * dy).hypot(c as f64 * dx) / d) as usize + 2;
@@ -308,7 +341,8 @@ fn support_radius_mm(rate: &Array2<f64>, centre: (f64, f64), dx: f64, dy: f64, f
     }
     let mut last = 0;
     for b in 0..nb {
-        if cnt[b] > 0 && sum[b] / cnt[b] as f64 > frac * peak {
+        let level = (SUPPORT_FLOOR * peak).max(3.0 * noise_rate / (cnt[b].max(1) as f64).sqrt());
+        if cnt[b] > 0 && sum[b] / cnt[b] as f64 > level {
             last = b;
         } else if cnt[b] > 0 && b > last + 3 {
             break;
