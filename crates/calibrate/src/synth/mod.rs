@@ -123,6 +123,9 @@ pub struct SynthConfig {
     pub deposit_step_mm: f64,
     pub spot_dwell_s: f64,
     pub spot_noise_nm: f64,
+    /// Where the spot's dip sits in its map, (x, y) mm from the map's centre pixel (a real
+    /// spot is never exactly centred).
+    pub spot_offset_mm: (f64, f64),
     /// White measurement noise RMS of each map (nm).
     pub noise_nm: f64,
     pub dropout_fraction: f64,
@@ -152,6 +155,7 @@ impl Default for SynthConfig {
             deposit_step_mm: 0.1,
             spot_dwell_s: 20.0,
             spot_noise_nm: 0.3,
+            spot_offset_mm: (0.0, 0.0),
             noise_nm: 0.3,
             dropout_fraction: 0.003,
             setup_tilt_nm: 15.0,
@@ -545,11 +549,14 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
     };
 
     // Measured spot: odd-sized map of the (unscaled) true TIF dwelled at its centre.
-    let half = (cfg.tif.radius_mm * 1.25 / d).ceil() as usize;
+    let off = cfg.spot_offset_mm.0.abs().max(cfg.spot_offset_mm.1.abs());
+    let half = ((cfg.tif.radius_mm * 1.25 + off) / d).ceil() as usize;
     let n = 2 * half + 1;
     let spot_h = Array2::from_shape_fn((n, n), |(i, j)| {
         let (x, y) = ((j as f64 - half as f64) * d, (i as f64 - half as f64) * d);
-        3.0 - cfg.spot_dwell_s * cfg.tif.rate(x, y, 1.0) + cfg.spot_noise_nm * rng.normal()
+        let (ox, oy) = cfg.spot_offset_mm;
+        3.0 - cfg.spot_dwell_s * cfg.tif.rate(x - ox, y - oy, 1.0)
+            + cfg.spot_noise_nm * rng.normal()
     });
     let mut spot = Surface::new(spot_h, Some(d), Some(d))?;
     spot.provenance.format = "synthetic".into();
