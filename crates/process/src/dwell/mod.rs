@@ -18,6 +18,8 @@
 //! penalty).
 
 pub mod case;
+pub mod feed;
+pub mod min_dwell;
 pub mod iterative;
 pub mod rifta;
 
@@ -29,6 +31,7 @@ use crate::fft::{fast_len, Convolver};
 use crate::tif::Tif;
 
 pub use case::DwellCase;
+pub use min_dwell::{DwellTarget, MinDwell, MinDwellOptions};
 pub use iterative::{solve_iterative, IterativeOptions};
 pub use rifta::{solve_rifta, RiftaOptions};
 
