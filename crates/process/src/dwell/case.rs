@@ -49,7 +49,10 @@ const SCHEMA: [(&str, &[&str]); 4] = [
             "machine",
         ],
     ),
-    ("tif", &["kind", "sigma_mm", "diameter_mm", "peak_rate_nm_per_s"]),
+    (
+        "tif",
+        &["kind", "sigma_mm", "diameter_mm", "peak_rate_nm_per_s"],
+    ),
     ("clear_aperture", &["rows", "cols", "x_mm", "y_mm"]),
     (
         "machine",
@@ -354,7 +357,9 @@ mod tests {
     #[test]
     fn unknown_keys_name_the_key_and_the_nearest_valid_one() {
         assert!(parse(GOOD).is_ok());
-        let e = parse(&GOOD.replace("sigma_mm", "sigma_nm")).unwrap_err().to_string();
+        let e = parse(&GOOD.replace("sigma_mm", "sigma_nm"))
+            .unwrap_err()
+            .to_string();
         assert!(
             e.starts_with("case.toml: [tif] sigma_nm: unknown key") && e.contains("`sigma_mm`"),
             "{e}"
@@ -362,8 +367,13 @@ mod tests {
         let e = parse(&format!("{GOOD}[machine]\na_max = 5.0\n"))
             .unwrap_err()
             .to_string();
-        assert!(e.contains("[machine] a_max") && e.contains("`a_max_mm_per_s2`"), "{e}");
-        let e = parse(&format!("pixle_mm = 1\n{GOOD}")).unwrap_err().to_string();
+        assert!(
+            e.contains("[machine] a_max") && e.contains("`a_max_mm_per_s2`"),
+            "{e}"
+        );
+        let e = parse(&format!("pixle_mm = 1\n{GOOD}"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("pixle_mm") && e.contains("`pixel_mm`"), "{e}");
         let c = parse(&format!("{GOOD}[machine]\nv_max_mm_per_s = 20\n")).unwrap();
         assert_eq!(c.limits.v_max_mm_per_s, 20.0);

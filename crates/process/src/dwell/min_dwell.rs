@@ -161,7 +161,8 @@ impl<'a> MinDwell<'a> {
         let rms = |a: &&DwellSolution, b: &&DwellSolution| {
             a.residual_rms_nm.total_cmp(&b.residual_rms_nm)
         };
-        let dwell = |a: &&DwellSolution, b: &&DwellSolution| a.total_dwell_s.total_cmp(&b.total_dwell_s);
+        let dwell =
+            |a: &&DwellSolution, b: &&DwellSolution| a.total_dwell_s.total_cmp(&b.total_dwell_s);
         let chosen = match target {
             DwellTarget::ResidualRms { nm } => sols
                 .iter()

@@ -19,8 +19,8 @@
 
 pub mod case;
 pub mod feed;
-pub mod min_dwell;
 pub mod iterative;
+pub mod min_dwell;
 pub mod rifta;
 
 use ndarray::{Array2, Zip};
@@ -31,8 +31,8 @@ use crate::fft::{fast_len, Convolver};
 use crate::tif::Tif;
 
 pub use case::DwellCase;
-pub use min_dwell::{DwellTarget, MinDwell, MinDwellOptions};
 pub use iterative::{solve_iterative, IterativeOptions};
+pub use min_dwell::{DwellTarget, MinDwell, MinDwellOptions};
 pub use rifta::{solve_rifta, RiftaOptions};
 
 /// A dwell problem on the dwell grid.
