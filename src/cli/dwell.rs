@@ -61,6 +61,10 @@ pub struct Args {
     /// min-dwell: least residual with total dwell <= this (min).
     #[arg(long)]
     pub max_dwell_min: Option<f64>,
+    /// min-dwell: projected-gradient iterations per trade-off point (more: lower residual at
+    /// the same total dwell, slower).
+    #[arg(long, default_value_t = MinDwellOptions::default().iterations)]
+    pub iterations: usize,
 }
 
 /// The JSON written by `dwell` (the first five fields are the CLI contract).
@@ -141,6 +145,7 @@ pub fn solve_case(
     case_file: &Path,
     method: Method,
     target: DwellTarget,
+    iterations: usize,
 ) -> Result<SolvedCase, CliError> {
     let case =
         DwellCase::load(case_file).map_err(|e| CliError::input(case_file, strip(case_file, e)))?;
@@ -150,7 +155,12 @@ pub fn solve_case(
     let t0 = Instant::now();
     let (sol, curve, point_solve_s, offset_nm) = match method {
         Method::MinDwell => {
-            let mut md = MinDwell::new(&cp.problem, &MinDwellOptions::default()).map_err(pe)?;
+            let o = MinDwellOptions {
+                iterations,
+                ..MinDwellOptions::default()
+            };
+            let mut md =
+                MinDwell::new(&cp.problem, &o).map_err(|e| CliError::input(case_file, e))?;
             let start_s = t0.elapsed().as_secs_f64();
             let (sol, curve) = md.pick(target).map_err(pe)?;
             // The chosen point alone, timed: its healing and evaluation from the shared start.
@@ -222,7 +232,7 @@ fn strip(file: &Path, e: bonnetlab_process::ProcessError) -> String {
 
 pub fn run(args: &Args) -> Result<(), CliError> {
     let target = target_of(args)?;
-    let solved = solve_case(&args.case, args.method, target)?;
+    let solved = solve_case(&args.case, args.method, target, args.iterations)?;
     if let Some(dir) = &args.out {
         write_outputs(dir, &solved)?;
     }

@@ -10,13 +10,13 @@
 //!
 //! Where limits bind: a pixel whose planned dwell is below the least the raster can give at
 //! v_max (dx / v_max), or above the most at v_min, is velocity-bound; a pixel whose executed
-//! dwell differs from the commanded path's by more than 5 % of max(commanded, mean dwell) is
+//! dwell differs from the commanded path's by more than 1 % of max(commanded, mean dwell) is
 //! acceleration-bound (the feed could not change fast enough there).
 
 use ndarray::Array2;
 use serde::Serialize;
 
-use super::{DwellProblem, PistonTilt};
+use super::DwellProblem;
 use crate::error::ProcessError;
 use crate::grid::Grid;
 use crate::path::kinematics::{dwell_raster, Limits};
@@ -96,19 +96,10 @@ pub fn realise<F: RateField + Clone + 'static>(
     let ds = 0.5 * dx.min(dy);
     let (commanded, realised) = dwell_raster(&spec, &density, grid, limits, ds)?;
     let mut fast = FastRemoval::from_field(field, grid)?;
-    let proj = PistonTilt::new(&p.aperture);
-    let residual_of = |removal: &Array2<f64>| proj.residual(&(&p.desired_nm - removal));
     let removal_cmd = fast.removal(&commanded, None)?;
     let removal = fast.removal(&realised, None)?;
-    let res_cmd = residual_of(&removal_cmd);
-    let residual = residual_of(&removal);
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for (r, &m) in residual.iter().zip(p.aperture.iter()) {
-        if m {
-            lo = lo.min(*r);
-            hi = hi.max(*r);
-        }
-    }
+    let res_cmd = p.residual_of_removal(&removal_cmd)?;
+    let res = p.residual_of_removal(&removal)?;
     // Where the limits bind.
     let d_cmd = dwell_map(&commanded, None, grid);
     let d_real = dwell_map(&realised, None, grid);
@@ -120,7 +111,7 @@ pub fn realise<F: RateField + Clone + 'static>(
         if t < t_min || t > t_max {
             *b = VELOCITY_BOUND;
             nv += 1;
-        } else if (d_real[ij] - d_cmd[ij]).abs() > 0.05 * d_cmd[ij].max(mean) {
+        } else if (d_real[ij] - d_cmd[ij]).abs() > 0.01 * d_cmd[ij].max(mean) {
             *b = ACCELERATION_BOUND;
             na += 1;
         }
@@ -131,9 +122,9 @@ pub fn realise<F: RateField + Clone + 'static>(
         planned_total_dwell_s: dwell_s.sum(),
         commanded_duration_s: commanded.duration_s(),
         realised_duration_s: realised.duration_s(),
-        commanded_residual_rms_nm: proj.rms(&res_cmd),
-        realised_residual_rms_nm: proj.rms(&residual),
-        realised_residual_pv_nm: hi - lo,
+        commanded_residual_rms_nm: res_cmd.rms_nm,
+        realised_residual_rms_nm: res.rms_nm,
+        realised_residual_pv_nm: res.pv_nm,
         velocity_bound_pixels: nv,
         acceleration_bound_pixels: na,
         bound_fraction: (nv + na) as f64 / binding.len().max(1) as f64,
@@ -143,7 +134,7 @@ pub fn realise<F: RateField + Clone + 'static>(
         summary,
         path: realised,
         removal_nm: removal,
-        residual_nm: residual,
+        residual_nm: res.residual_nm,
         binding,
     })
 }

@@ -17,8 +17,11 @@
 //! returns the solved point that meets a target (least total dwell with residual <= target, or
 //! least residual with total dwell <= a budget).
 //!
-//! (A scaled projection, with RIFTA's Fourier preconditioner inside the projected step, was
-//! tried and diverges: a non-diagonal metric with a Euclidean clip amplifies the clipped error.)
+//! Tried and dropped (see reports/performance_process.md): a scaled projection with RIFTA's
+//! Fourier preconditioner inside the projected step diverges (a non-diagonal metric with a
+//! Euclidean clip amplifies the clipped error); active-set preconditioned CG on the free pixels
+//! is stable but gains less per transform than FISTA (pixels reach zero on nearly every pass);
+//! gradient-based adaptive restart of FISTA never fired on these cases.
 
 use ndarray::Array2;
 use rustfft::num_complex::Complex;
@@ -47,8 +50,8 @@ impl Default for MinDwellOptions {
     fn default() -> Self {
         MinDwellOptions {
             rifta: RiftaOptions::default(),
-            iterations: 150,
-            offsets: [-0.06, -0.03, 0.0, 0.03, 0.06, 0.12, 0.25],
+            iterations: 300,
+            offsets: [-0.05, -0.03, -0.015, 0.0, 0.03, 0.08, 0.25],
         }
     }
 }
@@ -111,13 +114,8 @@ impl<'a> MinDwell<'a> {
             return Err(ProcessError::invalid("offset must be finite"));
         }
         let before = self.conv.fft().transforms();
-        let t = heal(
-            self.p,
-            &mut self.conv,
-            &self.t0,
-            offset_nm / self.vol,
-            self.o.iterations,
-        );
+        let lift = offset_nm / self.vol;
+        let t = heal(self.p, &mut self.conv, &self.t0, lift, self.o.iterations);
         let proj = PistonTilt::new(&self.p.aperture);
         let mut sol = finish(
             self.p,
