@@ -51,7 +51,7 @@ impl Default for MinDwellOptions {
         MinDwellOptions {
             rifta: RiftaOptions::default(),
             iterations: 300,
-            offsets: [-0.05, -0.03, -0.015, 0.0, 0.03, 0.08, 0.25],
+            offsets: [-0.1, -0.05, -0.025, 0.0, 0.03, 0.08, 0.25],
         }
     }
 }
