@@ -1,4 +1,5 @@
-//! `bonnetlab dwell CASE.toml [--json OUT] [--out DIR] [--method rifta|iterative]`
+//! `bonnetlab dwell CASE.toml [--json OUT] [--out DIR] [--method min-dwell|rifta|iterative]
+//! [--target-rms-nm X | --max-dwell-min M]`
 //! (contract: shared/spec/interfaces.md).
 //!
 //! Solves the dwell time of a case file (surface, Gaussian TIF, clear aperture; the format of
@@ -6,15 +7,23 @@
 //! aperture, piston and tilt removed), `total_dwell_s`, `wall_s` (solver only, no file reading)
 //! and `method`, plus the trade-off points and the case's reference figures. `--out DIR` writes
 //! the dwell map (`dwell_s.csv`, seconds per pixel), the residual map (`residual.dat`, nm) and
-//! plots (`dwell_map.png`, `residual.png`).
+//! plots (`dwell_map.png`, `residual.png`), the trade-off curve (`trade_off.csv`,
+//! `trade_off.png`), the executed residual (`realised_residual.dat`) and where the machine's
+//! limits bind (`feed_binding.csv`: 0 free, 1 velocity, 2 acceleration).
+//!
+//! `min-dwell` (default) sweeps the extra uniform removal and picks the point asked for:
+//! `--target-rms-nm` (least total dwell at that residual), `--max-dwell-min` (least residual
+//! within that budget), or neither (no extra removal). Every method's map is then realised as a
+//! raster feed under the case's `[machine]` limits and the executed residual reported (`feed`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use bonnetlab_io::MapFormat;
+use bonnetlab_process::dwell::feed::{realise, FeedRealisation, FeedSummary};
 use bonnetlab_process::dwell::{
-    solve_iterative, solve_rifta, DwellCase, DwellSolution, IterativeOptions, RiftaOptions,
-    TradeOffPoint,
+    solve_iterative, solve_rifta, DwellCase, DwellSolution, DwellTarget, IterativeOptions,
+    MinDwell, MinDwellOptions, RiftaOptions, TradeOffPoint,
 };
 use bonnetlab_surface::Surface;
 use serde::Serialize;
@@ -24,6 +33,9 @@ use crate::report;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Method {
+    /// Least total dwell at the residual target: RIFTA start, chosen uniform offset, projected
+    /// gradient (non-negative).
+    MinDwell,
     /// Inverse filter with preconditioned conjugate-gradient refinement (fast).
     Rifta,
     /// Accelerated projected gradient, non-negative throughout (slower).
@@ -41,8 +53,18 @@ pub struct Args {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Solver.
-    #[arg(long, value_enum, default_value = "rifta")]
+    #[arg(long, value_enum, default_value = "min-dwell")]
     pub method: Method,
+    /// min-dwell: least total dwell with residual RMS <= this (nm).
+    #[arg(long, conflicts_with = "max_dwell_min")]
+    pub target_rms_nm: Option<f64>,
+    /// min-dwell: least residual with total dwell <= this (min).
+    #[arg(long)]
+    pub max_dwell_min: Option<f64>,
+    /// min-dwell: projected-gradient iterations per trade-off point (more: lower residual at
+    /// the same total dwell, slower).
+    #[arg(long, default_value_t = MinDwellOptions::default().iterations)]
+    pub iterations: usize,
 }
 
 /// The JSON written by `dwell` (the first five fields are the CLI contract).
@@ -57,7 +79,21 @@ pub struct DwellReport {
     pub iterations: usize,
     pub dwell_grid_rows: usize,
     pub dwell_grid_cols: usize,
+    /// Residual vs total dwell (min-dwell: one point per extra uniform removal, `parameter`
+    /// in nm; other methods: their knob).
     pub trade_off: Vec<TradeOffPoint>,
+    /// What was asked of the trade-off, and whether the chosen point meets it.
+    pub target: DwellTarget,
+    pub target_met: bool,
+    /// Extra uniform removal of the chosen point (nm; min-dwell only).
+    pub offset_nm: Option<f64>,
+    /// Time of the chosen point's own solve (start + healing + evaluation), s; `wall_s`
+    /// covers the whole sweep.
+    pub point_solve_s: f64,
+    /// Real 2-D FFTs of the chosen point's solve.
+    pub fft_count: usize,
+    /// The dwell map executed as a raster feed under the machine limits.
+    pub feed: FeedSummary,
     /// The case's `[reference]` table, unchanged, for side-by-side reading.
     pub reference: Option<serde_json::Value>,
 }
@@ -70,29 +106,90 @@ fn proc_err(file: &Path, e: bonnetlab_process::ProcessError) -> CliError {
     }
 }
 
-/// Loads, solves and reports a case (no output files).
-/// The solved case: report, solution, clear-aperture mask on the dwell grid, the dwell grid's
-/// offset in the map (rows, cols) and the pixel size.
-pub type SolvedCase = (
-    DwellReport,
-    DwellSolution,
-    ndarray::Array2<bool>,
-    (usize, usize),
-    f64,
-);
+/// A solved case: the report, the chosen solution, its feed realisation, the clear-aperture
+/// mask on the dwell grid, the dwell grid's offset in the map (rows, cols) and the pixel size.
+pub struct SolvedCase {
+    pub report: DwellReport,
+    pub solution: DwellSolution,
+    pub feed: FeedRealisation,
+    pub aperture: ndarray::Array2<bool>,
+    pub offset: (usize, usize),
+    pub pixel_mm: f64,
+}
 
-pub fn solve_case(case_file: &Path, method: Method) -> Result<SolvedCase, CliError> {
+/// What the user asked of the trade-off.
+pub fn target_of(args: &Args) -> Result<DwellTarget, CliError> {
+    let pos = |v: f64, name: &str| {
+        if v.is_finite() && v > 0.0 {
+            Ok(v)
+        } else {
+            Err(CliError::input(
+                &args.case,
+                format!("{name} must be a positive number, got {v}"),
+            ))
+        }
+    };
+    Ok(match (args.target_rms_nm, args.max_dwell_min) {
+        (Some(nm), _) => DwellTarget::ResidualRms {
+            nm: pos(nm, "--target-rms-nm")?,
+        },
+        (None, Some(min)) => DwellTarget::MaxDwell {
+            s: 60.0 * pos(min, "--max-dwell-min")?,
+        },
+        (None, None) => DwellTarget::NoOffset,
+    })
+}
+
+/// Loads, solves, realises and reports a case (no output files).
+pub fn solve_case(
+    case_file: &Path,
+    method: Method,
+    target: DwellTarget,
+    iterations: usize,
+) -> Result<SolvedCase, CliError> {
     let case =
         DwellCase::load(case_file).map_err(|e| CliError::input(case_file, strip(case_file, e)))?;
     let map = super::stats::read_map(&case.surface)?;
     let cp = case.problem(&map).map_err(|e| proc_err(case_file, e))?;
+    let pe = |e| proc_err(case_file, e);
     let t0 = Instant::now();
-    let sol = match method {
-        Method::Rifta => solve_rifta(&cp.problem, &RiftaOptions::default()),
-        Method::Iterative => solve_iterative(&cp.problem, &IterativeOptions::default()),
-    }
-    .map_err(|e| proc_err(case_file, e))?;
+    let (sol, curve, point_solve_s, offset_nm) = match method {
+        Method::MinDwell => {
+            let o = MinDwellOptions {
+                iterations,
+                ..MinDwellOptions::default()
+            };
+            let mut md =
+                MinDwell::new(&cp.problem, &o).map_err(|e| CliError::input(case_file, e))?;
+            let start_s = t0.elapsed().as_secs_f64();
+            let (sol, curve) = md.pick(target).map_err(pe)?;
+            // The chosen point alone, timed: its healing and evaluation from the shared start.
+            let off = sol.trade_off[0].parameter;
+            let t1 = Instant::now();
+            let again = md.solve(off).map_err(pe)?;
+            let point = start_s + t1.elapsed().as_secs_f64();
+            debug_assert_eq!(again.total_dwell_s, sol.total_dwell_s);
+            (sol, curve, point, Some(off))
+        }
+        Method::Rifta => {
+            let s = solve_rifta(&cp.problem, &RiftaOptions::default()).map_err(pe)?;
+            let c = s.trade_off.clone();
+            (s, c, t0.elapsed().as_secs_f64(), None)
+        }
+        Method::Iterative => {
+            let s = solve_iterative(&cp.problem, &IterativeOptions::default()).map_err(pe)?;
+            let c = s.trade_off.clone();
+            (s, c, t0.elapsed().as_secs_f64(), None)
+        }
+    };
     let wall_s = t0.elapsed().as_secs_f64();
+    let target_met = match target {
+        DwellTarget::ResidualRms { nm } => sol.residual_rms_nm <= nm,
+        DwellTarget::MaxDwell { s } => sol.total_dwell_s <= s,
+        DwellTarget::NoOffset => true,
+    };
+    let grid = case.dwell_grid(&cp).map_err(pe)?;
+    let feed = realise(&cp.problem, &sol.dwell_s, &case.tif, &grid, &case.limits).map_err(pe)?;
     let (r, c) = cp.problem.dim();
     let report = DwellReport {
         residual_rms_nm: sol.residual_rms_nm,
@@ -104,13 +201,26 @@ pub fn solve_case(case_file: &Path, method: Method) -> Result<SolvedCase, CliErr
         iterations: sol.iterations,
         dwell_grid_rows: r,
         dwell_grid_cols: c,
-        trade_off: sol.trade_off.clone(),
+        trade_off: curve,
+        target,
+        target_met,
+        offset_nm,
+        point_solve_s,
+        fft_count: sol.fft_count,
+        feed: feed.summary.clone(),
         reference: case
             .reference
             .as_ref()
             .and_then(|t| serde_json::to_value(t).ok()),
     };
-    Ok((report, sol, cp.problem.aperture, cp.offset, case.pixel_mm))
+    Ok(SolvedCase {
+        report,
+        solution: sol,
+        feed,
+        aperture: cp.problem.aperture,
+        offset: cp.offset,
+        pixel_mm: case.pixel_mm,
+    })
 }
 
 /// Errors from the case loader already name the file; keep the message as is.
@@ -121,26 +231,42 @@ fn strip(file: &Path, e: bonnetlab_process::ProcessError) -> String {
 }
 
 pub fn run(args: &Args) -> Result<(), CliError> {
-    let (report, sol, aperture, offset, pixel_mm) = solve_case(&args.case, args.method)?;
+    let target = target_of(args)?;
+    let solved = solve_case(&args.case, args.method, target, args.iterations)?;
     if let Some(dir) = &args.out {
-        write_outputs(dir, &sol, &aperture, offset, pixel_mm)?;
+        write_outputs(dir, &solved)?;
     }
+    let report = &solved.report;
     let text =
-        serde_json::to_string_pretty(&report).map_err(|e| CliError::processing(&args.case, e))?;
+        serde_json::to_string_pretty(report).map_err(|e| CliError::processing(&args.case, e))?;
     match &args.json {
-        Some(p) => report::write::json(p, &report).map_err(|e| CliError::input(&e.file, e.what))?,
+        Some(p) => report::write::json(p, report).map_err(|e| CliError::input(&e.file, e.what))?,
         None => println!("{text}"),
     }
     Ok(())
 }
 
-fn write_outputs(
-    dir: &Path,
-    sol: &DwellSolution,
-    aperture: &ndarray::Array2<bool>,
-    offset: (usize, usize),
-    pixel_mm: f64,
-) -> Result<(), CliError> {
+/// The reference methods' (total dwell min, residual nm) points of a case's `[reference]`.
+fn reference_points(reference: Option<&serde_json::Value>) -> Vec<report::dwell_report::RefPoint> {
+    let Some(obj) = reference.and_then(|v| v.as_object()) else {
+        return Vec::new();
+    };
+    obj.iter()
+        .filter_map(|(name, v)| {
+            let min = v.get("total_dwell_min")?.as_f64()?;
+            let rms = v.get("residual_rms_nm")?.as_f64()?;
+            Some((name.clone(), min, rms))
+        })
+        .collect()
+}
+
+fn write_outputs(dir: &Path, solved: &SolvedCase) -> Result<(), CliError> {
+    let (sol, aperture, offset, pixel_mm) = (
+        &solved.solution,
+        &solved.aperture,
+        solved.offset,
+        solved.pixel_mm,
+    );
     std::fs::create_dir_all(dir)
         .map_err(|e| CliError::input(dir, format!("cannot create the output directory: {e}")))?;
     let on_grid = |a: &ndarray::Array2<f64>,
@@ -169,6 +295,28 @@ fn write_outputs(
         report::write::bytes(&dir.join(name), &bytes).map_err(|e| CliError::input(&e.file, e.what))
     };
     png("dwell_map.png", &dwell, "dwell map (s per pixel)", "s")?;
+    let realised = on_grid(&solved.feed.residual_nm, Some(aperture))?;
+    w(
+        dir.join("realised_residual.dat"),
+        &realised,
+        MapFormat::MetroProDat,
+    )?;
+    let binding = on_grid(&solved.feed.binding.mapv(f64::from), None)?;
+    w(dir.join("feed_binding.csv"), &binding, MapFormat::Csv)?;
+    let (header, cols) = report::dwell_report::trade_off_columns(&solved.report.trade_off);
+    let cols: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
+    report::write::csv_columns(&dir.join("trade_off.csv"), &header, &cols)
+        .map_err(|e| CliError::input(&e.file, e.what))?;
+    let chosen = sol.trade_off.first().copied().unwrap_or(TradeOffPoint {
+        parameter: 0.0,
+        residual_rms_nm: sol.residual_rms_nm,
+        total_dwell_s: sol.total_dwell_s,
+    });
+    let refs = reference_points(solved.report.reference.as_ref());
+    let bytes = report::dwell_report::trade_off_png(&solved.report.trade_off, &chosen, &refs)
+        .map_err(|e| CliError::processing(dir.join("trade_off.png"), e.what))?;
+    report::write::bytes(&dir.join("trade_off.png"), &bytes)
+        .map_err(|e| CliError::input(&e.file, e.what))?;
     png(
         "residual.png",
         &residual,

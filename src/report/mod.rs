@@ -3,6 +3,7 @@
 
 pub mod compare_report;
 pub mod comparison;
+pub mod dwell_report;
 pub mod font;
 pub mod html;
 pub mod maps;

@@ -2,6 +2,11 @@
 //! aperture in pixel rows / columns, optional reference results). The surface path is relative
 //! to the case file; the map is read by the caller (`bonnetlab_io`), so this crate stays free of
 //! file formats.
+//!
+//! Unknown keys are rejected (a typo must never be silently ignored), naming the key and the
+//! nearest valid key by edit distance; `[reference]` is free-form. An optional `[machine]` table
+//! gives the speed and acceleration limits of the feed realisation ([`Limits`]; defaults:
+//! `Limits::default()`).
 
 use std::path::{Path, PathBuf};
 
@@ -11,6 +16,7 @@ use toml::{Table, Value};
 
 use super::DwellProblem;
 use crate::error::ProcessError;
+use crate::path::kinematics::Limits;
 use crate::tif::{GaussianTif, Tif};
 
 /// A parsed dwell case.
@@ -26,6 +32,104 @@ pub struct DwellCase {
     pub ca_cols: (usize, usize),
     /// The `[reference]` table, kept raw.
     pub reference: Option<Table>,
+    /// Machine limits for the feed realisation (`[machine]`).
+    pub limits: Limits,
+}
+
+/// Keys each table may hold (`None`: the top level); `[reference]` is free-form.
+const SCHEMA: [(&str, &[&str]); 4] = [
+    (
+        "",
+        &[
+            "surface",
+            "pixel_mm",
+            "tif",
+            "clear_aperture",
+            "reference",
+            "machine",
+        ],
+    ),
+    (
+        "tif",
+        &["kind", "sigma_mm", "diameter_mm", "peak_rate_nm_per_s"],
+    ),
+    ("clear_aperture", &["rows", "cols", "x_mm", "y_mm"]),
+    (
+        "machine",
+        &[
+            "v_min_mm_per_s",
+            "v_max_mm_per_s",
+            "a_max_mm_per_s2",
+            "stop_angle_deg",
+        ],
+    ),
+];
+
+/// Levenshtein distance (for the nearest valid key).
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut prev: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut cur = vec![i + 1; b.len() + 1];
+        for (j, cb) in b.iter().enumerate() {
+            cur[j + 1] = (prev[j] + usize::from(ca != *cb))
+                .min(prev[j + 1] + 1)
+                .min(cur[j] + 1);
+        }
+        prev = cur;
+    }
+    prev[b.len()]
+}
+
+/// Edit distance to a valid key, or to its prefix of the same length plus one (so a
+/// shortened key such as `a_max` finds `a_max_mm_per_s2`).
+fn key_distance(key: &str, valid: &str) -> usize {
+    let n = key.chars().count();
+    let prefix: String = valid.chars().take(n).collect();
+    let p = if prefix.len() < valid.len() {
+        edit_distance(key, &prefix) + 1
+    } else {
+        usize::MAX
+    };
+    edit_distance(key, valid).min(p)
+}
+
+/// The first unknown key of `root` (table path, key, nearest valid key).
+fn unknown_key(root: &Table) -> Option<(String, String, &'static str)> {
+    for (table, keys) in SCHEMA {
+        let t = if table.is_empty() {
+            root
+        } else {
+            match root.get(table).and_then(Value::as_table) {
+                Some(t) => t,
+                None => continue,
+            }
+        };
+        for k in t.keys() {
+            if !keys.contains(&k.as_str()) {
+                let near = keys
+                    .iter()
+                    .min_by_key(|c| key_distance(k, c))
+                    .copied()
+                    .unwrap_or("");
+                let path = if table.is_empty() {
+                    k.clone()
+                } else {
+                    format!("[{table}] {k}")
+                };
+                return Some((path, k.clone(), near));
+            }
+        }
+    }
+    None
+}
+
+/// Line and column (1-based) of byte offset `at` in `text`.
+fn line_col(text: &str, at: usize) -> (usize, usize) {
+    let before = &text[..at.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
 }
 
 /// A case's problem and where its dwell grid sits in the map.
@@ -52,15 +156,21 @@ impl DwellCase {
             what,
         };
         let root: Table = text.parse().map_err(|e: toml::de::Error| {
-            err(
-                "TOML",
-                e.to_string()
-                    .lines()
-                    .next()
-                    .unwrap_or("invalid TOML")
-                    .to_string(),
-            )
+            let at = e
+                .span()
+                .map(|r| {
+                    let (l, c) = line_col(text, r.start);
+                    format!("line {l} column {c}: ")
+                })
+                .unwrap_or_default();
+            err("TOML syntax", format!("{at}{}", e.message().trim()))
         })?;
+        if let Some((path, key, near)) = unknown_key(&root) {
+            return Err(err(
+                &path,
+                format!("unknown key `{key}` (did you mean `{near}`?)"),
+            ));
+        }
         let num = |t: &Table, key: &str, name: &str| -> Result<f64, ProcessError> {
             match t.get(key) {
                 Some(Value::Float(f)) if f.is_finite() && *f > 0.0 => Ok(*f),
@@ -120,7 +230,21 @@ impl DwellCase {
             ca_rows: range(ca, "rows", "[clear_aperture] rows")?,
             ca_cols: range(ca, "cols", "[clear_aperture] cols")?,
             reference: root.get("reference").and_then(Value::as_table).cloned(),
+            limits: machine_limits(&root, &err)?,
         })
+    }
+
+    /// The case's dwell grid in the map frame (mm): the CA grown by the TIF radius.
+    pub fn dwell_grid(&self, cp: &CaseProblem) -> Result<crate::grid::Grid, ProcessError> {
+        let (r, c) = cp.problem.dim();
+        crate::grid::Grid::new(
+            r,
+            c,
+            self.pixel_mm,
+            self.pixel_mm,
+            cp.offset.1 as f64 * self.pixel_mm,
+            cp.offset.0 as f64 * self.pixel_mm,
+        )
     }
 
     /// The TIF sampled at the case's pixel (point samples inside the disc, as the cases' own
@@ -178,5 +302,91 @@ impl DwellCase {
             Value::Float(f) if key.is_empty() => Some(*f),
             _ => None,
         }
+    }
+}
+
+/// The `[machine]` limits (defaults for absent keys), checked.
+fn machine_limits(
+    root: &Table,
+    err: &dyn Fn(&str, String) -> ProcessError,
+) -> Result<Limits, ProcessError> {
+    let mut l = Limits::default();
+    let Some(v) = root.get("machine") else {
+        return Ok(l);
+    };
+    let t = v
+        .as_table()
+        .ok_or_else(|| err("[machine]", "must be a table".into()))?;
+    for (key, slot) in [
+        ("v_min_mm_per_s", &mut l.v_min_mm_per_s),
+        ("v_max_mm_per_s", &mut l.v_max_mm_per_s),
+        ("a_max_mm_per_s2", &mut l.a_max_mm_per_s2),
+        ("stop_angle_deg", &mut l.stop_angle_deg),
+    ] {
+        match t.get(key) {
+            None => {}
+            Some(Value::Float(f)) if f.is_finite() && *f > 0.0 => *slot = *f,
+            Some(Value::Integer(i)) if *i > 0 => *slot = *i as f64,
+            Some(_) => {
+                return Err(err(
+                    &format!("[machine] {key}"),
+                    "must be a positive number".into(),
+                ))
+            }
+        }
+    }
+    if l.v_min_mm_per_s > l.v_max_mm_per_s {
+        return Err(err(
+            "[machine]",
+            "v_min_mm_per_s must not exceed v_max_mm_per_s".into(),
+        ));
+    }
+    Ok(l)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = "surface = \"s.dat\"\npixel_mm = 0.5\n[tif]\nkind = \"gaussian\"\nsigma_mm = 1.0\ndiameter_mm = 6.0\npeak_rate_nm_per_s = 1.0\n[clear_aperture]\nrows = [10, 20]\ncols = [10, 30]\n";
+
+    fn parse(text: &str) -> Result<DwellCase, ProcessError> {
+        DwellCase::parse(text, Path::new("case.toml"))
+    }
+
+    #[test]
+    fn unknown_keys_name_the_key_and_the_nearest_valid_one() {
+        assert!(parse(GOOD).is_ok());
+        let e = parse(&GOOD.replace("sigma_mm", "sigma_nm"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("case.toml: [tif] sigma_nm: unknown key") && e.contains("`sigma_mm`"),
+            "{e}"
+        );
+        let e = parse(&format!("{GOOD}[machine]\na_max = 5.0\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("[machine] a_max") && e.contains("`a_max_mm_per_s2`"),
+            "{e}"
+        );
+        let e = parse(&format!("pixle_mm = 1\n{GOOD}"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("pixle_mm") && e.contains("`pixel_mm`"), "{e}");
+        let c = parse(&format!("{GOOD}[machine]\nv_max_mm_per_s = 20\n")).unwrap();
+        assert_eq!(c.limits.v_max_mm_per_s, 20.0);
+        assert_eq!(edit_distance("kitten", "sitting"), 3);
+    }
+
+    #[test]
+    fn syntax_errors_carry_the_cause_and_place() {
+        let e = parse("surface = \"s.dat\nbad").unwrap_err().to_string();
+        assert!(
+            e.starts_with("case.toml: TOML syntax: line 2 column 4: ") && e.contains("expected"),
+            "{e}"
+        );
+        assert!(!e.contains('\n'));
     }
 }

@@ -18,7 +18,9 @@
 //! penalty).
 
 pub mod case;
+pub mod feed;
 pub mod iterative;
+pub mod min_dwell;
 pub mod rifta;
 
 use ndarray::{Array2, Zip};
@@ -30,6 +32,7 @@ use crate::tif::Tif;
 
 pub use case::DwellCase;
 pub use iterative::{solve_iterative, IterativeOptions};
+pub use min_dwell::{DwellTarget, MinDwell, MinDwellOptions};
 pub use rifta::{solve_rifta, RiftaOptions};
 
 /// A dwell problem on the dwell grid.
@@ -144,6 +147,44 @@ impl DwellProblem {
             0,
             Vec::new(),
         ))
+    }
+}
+
+/// Residual of a removal map against a problem: the CA residual map (piston and tilt removed,
+/// 0 outside the CA), its RMS and PV (nm).
+#[derive(Debug, Clone)]
+pub struct RemovalResidual {
+    pub residual_nm: Array2<f64>,
+    pub rms_nm: f64,
+    pub pv_nm: f64,
+}
+
+impl DwellProblem {
+    /// The residual a removal map (nm, on the dwell grid; only CA pixels matter) leaves: the
+    /// evaluation any forward model (FFT, exact deposition of a path) is judged by.
+    pub fn residual_of_removal(
+        &self,
+        removal_nm: &Array2<f64>,
+    ) -> Result<RemovalResidual, ProcessError> {
+        if removal_nm.dim() != self.dim() {
+            return Err(ProcessError::invalid(
+                "removal map does not match the dwell grid",
+            ));
+        }
+        let proj = PistonTilt::new(&self.aperture);
+        let residual = proj.residual(&(&self.desired_nm - removal_nm));
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        Zip::from(&residual).and(&self.aperture).for_each(|&r, &m| {
+            if m {
+                lo = lo.min(r);
+                hi = hi.max(r);
+            }
+        });
+        Ok(RemovalResidual {
+            rms_nm: proj.rms(&residual),
+            pv_nm: hi - lo,
+            residual_nm: residual,
+        })
     }
 }
 

@@ -53,15 +53,15 @@ type C64 = Complex<f64>;
 
 /// The CA pixels of the dwell grid as flat indices into the transform's real array, with an
 /// orthonormal piston + tilt basis over them (the projection P of the module docs).
-struct CaProjector {
-    flat: Vec<usize>,
+pub(crate) struct CaProjector {
+    pub(crate) flat: Vec<usize>,
     basis: Vec<Vec<f64>>,
     /// The basis interleaved per pixel (missing vectors as zeros), for the fused passes.
     basis_pp: Vec<[f64; 3]>,
 }
 
 impl CaProjector {
-    fn new(p: &DwellProblem, n1: usize) -> CaProjector {
+    pub(crate) fn new(p: &DwellProblem, n1: usize) -> CaProjector {
         let idx: Vec<(usize, usize)> = p
             .aperture
             .indexed_iter()
@@ -108,7 +108,7 @@ impl CaProjector {
 
     /// Replaces `real` by P `real`: CA values with piston and tilt removed (also left in `v`),
     /// zero elsewhere. Two passes: gather with the basis dot products, then subtract and scatter.
-    fn project_in_place(&self, real: &mut [f64], v: &mut [f64]) {
+    pub(crate) fn project_in_place(&self, real: &mut [f64], v: &mut [f64]) {
         let mut dots = [0.0; 3];
         for ((d, &f), u) in v.iter_mut().zip(&self.flat).zip(&self.basis_pp) {
             *d = real[f];
@@ -136,7 +136,7 @@ impl CaProjector {
         v.iter().zip(&self.flat).for_each(|(s, &k)| real[k] = *s);
     }
 
-    fn rms(&self, v: &[f64]) -> f64 {
+    pub(crate) fn rms(&self, v: &[f64]) -> f64 {
         (v.iter().map(|x| x * x).sum::<f64>() / self.flat.len().max(1) as f64).sqrt()
     }
 }
@@ -147,10 +147,33 @@ impl CaProjector {
 /// for the start residual, one inverse + forward per pass, one inverse for the dwell map and
 /// two for the final evaluation ([`DwellProblem::evaluate`]'s convolution): 2 passes + 7.
 pub fn solve_rifta(p: &DwellProblem, o: &RiftaOptions) -> Result<DwellSolution, ProcessError> {
+    let mut conv = p.convolver();
+    let (mut t, passes) = rifta_unlifted(p, o, &mut conv)?;
+    let min = t.iter().fold(f64::INFINITY, |m, &v| m.min(v));
+    if min < 0.0 {
+        t.mapv_inplace(|v| v - min);
+    }
+    let proj = PistonTilt::new(&p.aperture);
+    let mut sol = finish(p, &proj, &mut conv, t, "rifta", passes, Vec::new());
+    sol.trade_off = vec![TradeOffPoint {
+        parameter: o.gamma,
+        residual_rms_nm: sol.residual_rms_nm,
+        total_dwell_s: sol.total_dwell_s,
+    }];
+    Ok(sol)
+}
+
+/// The refined inverse-filter dwell map before the offset that makes it non-negative (it has
+/// negative lobes), and the number of refinement passes, computed with `conv` (the problem's
+/// convolver, whose transform count then includes this solve).
+pub(crate) fn rifta_unlifted(
+    p: &DwellProblem,
+    o: &RiftaOptions,
+    conv: &mut crate::fft::Convolver,
+) -> Result<(Array2<f64>, usize), ProcessError> {
     if !(o.gamma > 0.0 && o.gamma < 1.0) {
         return Err(ProcessError::invalid("RIFTA gamma must be in (0, 1)"));
     }
-    let mut conv = p.convolver();
     let bh: Vec<C64> = conv.kernel_spectrum().to_vec();
     let bmax2 = bh.iter().fold(0.0f64, |m, k| m.max(k.norm_sqr()));
     if bmax2 <= 0.0 {
@@ -158,7 +181,7 @@ pub fn solve_rifta(p: &DwellProblem, o: &RiftaOptions) -> Result<DwellSolution, 
     }
     let mu = o.gamma * o.gamma * bmax2;
     let (rows, cols) = p.dim();
-    let (mut t, passes) = {
+    let (t, passes) = {
         let fft = conv.fft();
         let len = fft.spectrum_len();
         let (n0, n1) = fft.shape();
@@ -301,18 +324,7 @@ pub fn solve_rifta(p: &DwellProblem, o: &RiftaOptions) -> Result<DwellSolution, 
             passes,
         )
     };
-    let min = t.iter().fold(f64::INFINITY, |m, &v| m.min(v));
-    if min < 0.0 {
-        t.mapv_inplace(|v| v - min);
-    }
-    let proj = PistonTilt::new(&p.aperture);
-    let mut sol = finish(p, &proj, &mut conv, t, "rifta", passes, Vec::new());
-    sol.trade_off = vec![TradeOffPoint {
-        parameter: o.gamma,
-        residual_rms_nm: sol.residual_rms_nm,
-        total_dwell_s: sol.total_dwell_s,
-    }];
-    Ok(sol)
+    Ok((t, passes))
 }
 
 /// Residual vs total dwell over a set of thresholds gamma (each a full solve).
