@@ -1,27 +1,29 @@
-//! Band-limited RMS from the map itself, by areal Gaussian filtering that honours the mask:
-//! the band values every report shows (`stats --bands`, `compare`, and the lead's simulate /
-//! calibrate through [`band_split`]).
+//! Band-limited RMS from the map itself: the band values every report shows (`stats --bands`,
+//! `compare`, and the lead's simulate / calibrate through [`band_split`]).
 //!
 //! Bands (edges F1 <= F2 in cycles/mm, default [`BAND_EDGES_DEFAULT_PER_MM`]): *figure* below
-//! F1, *MSF* from F1 to F2, *fine* above F2.
+//! F1, *MSF* from F1 to F2, *fine* above F2, by radial frequency |f| = sqrt(fx^2 + fy^2).
 //!
-//! Method, after the joint removal of the requested form terms and of the valid-pixel mean
-//! (z is that residual, n its valid pixels):
-//! 1. low-pass L_F z at each edge F by the ISO 16610-61 areal Gaussian, weighting function
-//!    s(x, y) ∝ exp(-pi (x^2 + y^2) / (alpha lambda)^2), alpha = sqrt(ln 2 / pi),
-//!    lambda = 1 / F: amplitude transmission exp(-pi (alpha lambda f)^2), 50 % at f = F;
-//! 2. edge handling (masks, round apertures, dropouts, the map border): the kernel is
-//!    renormalised over the valid pixels it covers, L z = G*(M z) / G*M (normalised
-//!    convolution, the ISO 16610-28 / Gwyddion "masked" convention); invalid pixels never
-//!    enter a sum;
-//! 3. components: figure c_f = L_F1 z, MSF c_m = L_F2 z - L_F1 z, fine c_h = z - L_F2 z. They
-//!    add up to z exactly on every valid pixel;
+//! Method: exact spectral (brick-wall) filtering in the cosine basis, after the joint removal of
+//! the requested form terms and of the valid-pixel mean (z is that residual, n its valid
+//! pixels):
+//! 1. edge handling, part 1 (holes, round apertures): invalid pixels are filled by a smooth
+//!    continuation of the data, normalised Gaussian convolution G*(M z) / G*M at the smallest
+//!    of the scales 4, 16, 64, ... pixels whose kernel reaches at least one pixel's worth of
+//!    valid weight (small dropouts take the local mean, the corners outside a round aperture
+//!    a broad average). The fill only carries the data across holes; it is never counted;
+//! 2. edge handling, part 2 (the map border): the 2-D DCT-II, i.e. the DFT of the map mirrored
+//!    about each border, so the periodic continuation has no jump at the border and no window
+//!    is needed. DCT index (k, l) has frequency (k / (2 Nx dx), l / (2 Ny dy));
+//! 3. components: c_b = inverse DCT of the coefficients with |f| in band b (figure |f| < F1,
+//!    MSF F1 <= |f| < F2, fine |f| >= F2). On a full rectangle they are orthogonal (the DCT is)
+//!    and their mean squares add up to Sq^2 exactly;
 //! 4. band power = covariance of the component with the map over the valid pixels,
-//!    P_b = <c_b, z> / n, and band RMS = sqrt(P_b). Because the components add up to z, the
-//!    three powers add up to <z, z> / n = Sq^2 exactly, on any aperture. On a full periodic map
-//!    with an ideal filter this is the component's own mean square; with a mask the two differ
-//!    by the cross terms <c_a, c_b>, which are reported (`cross_term_fraction`) so a reader can
-//!    see how far from orthogonal the split was.
+//!    P_b = <c_b, z>_valid / n, band RMS = sqrt(P_b). The components add up to z on every
+//!    valid pixel, so the three powers add up to <z, z> / n = Sq^2 exactly on any aperture; on
+//!    a full rectangle P_b is the component's own mean square. With holes the two differ by
+//!    the cross terms <c_a, c_b>_valid, reported as `cross_term_fraction` (sum over bands of
+//!    |P_b - own_b| / Sq^2) so a reader can see how far from orthogonal the split was.
 //!
 //! A band the map cannot resolve is `None` with a reason: no pixel size, the band lies
 //! below the lowest measured frequency 1 / (the valid field's longest side), or above the
@@ -48,15 +50,9 @@ use crate::error::SpectrumError;
 /// (NIF / LLNL) convention for mid-spatial frequencies.
 pub const BAND_EDGES_DEFAULT_PER_MM: (f64, f64) = (1.0 / 33.0, 1.0 / 0.12);
 
-/// ISO 16610-61 Gaussian constant alpha = sqrt(ln 2 / pi).
-pub fn gaussian_alpha() -> f64 {
+/// ISO 16610-61 Gaussian constant alpha = sqrt(ln 2 / pi) (the fill's kernels).
+fn gaussian_alpha() -> f64 {
     (std::f64::consts::LN_2 / std::f64::consts::PI).sqrt()
-}
-
-/// Amplitude transmission of the ISO Gaussian low-pass with cutoff `f_cut` at frequency f.
-pub fn gaussian_lowpass_transmission(f_per_mm: f64, f_cut_per_mm: f64) -> f64 {
-    let a = gaussian_alpha() * f_per_mm / f_cut_per_mm;
-    (-std::f64::consts::PI * a * a).exp()
 }
 
 /// The three band RMS values of one map (field names as `stats --bands` writes them).
@@ -99,10 +95,10 @@ impl ArealBands {
 }
 
 /// The method string written beside the values.
-pub const AREAL_METHOD: &str = "ISO 16610-61 areal Gaussian low-pass at each edge (50 % \
-     amplitude transmission at the edge), kernel renormalised over valid pixels; band power = \
-     covariance of the band component with the map over the valid pixels, so the bands add up \
-     to Sq^2 exactly";
+pub const AREAL_METHOD: &str = "areal split of the map: brick-wall bands of the 2-D DCT \
+     (mirrored borders, no window) by radial frequency, holes filled by normalised Gaussian \
+     continuation; band power = covariance of the band component with the map over the valid \
+     pixels, so the bands add up to Sq^2 exactly";
 
 /// Band RMS of `s` after removing `remove` jointly (and the mean), split at `edges_per_mm`.
 pub fn band_split(
@@ -175,13 +171,25 @@ pub fn band_split(
     };
     // Low-pass at an edge: None = nothing passes (edge below the range), Some(None) = all
     // passes (edge above the range), Some(Some(map)) = filtered.
+    let cut = |f: f64| f > f_lo && f < f_hi;
+    // DCT coefficients of the filled map, once for both edges.
+    let coeffs = if cut(f1) || cut(f2) {
+        let filled = if n == valid.len() {
+            z.clone()
+        } else {
+            fill_holes(&z, &valid, dx, dy)
+        };
+        Some(dct2(&filled, false))
+    } else {
+        None
+    };
     let lowpass = |f: f64| -> Option<Option<Array2<f64>>> {
         if f <= f_lo {
             None
         } else if f >= f_hi {
             Some(None)
         } else {
-            Some(Some(masked_gaussian(&z, &valid, dx, dy, 1.0 / f)))
+            coeffs.as_ref().map(|c| Some(radial_lowpass(c, dx, dy, f)))
         }
     };
     let l1 = lowpass(f1);
@@ -257,27 +265,124 @@ fn valid_extent_mm(valid: &Array2<bool>, dx: f64, dy: f64) -> (f64, f64) {
     ((c1 - c0 + 1) as f64 * dx, (r1 - r0 + 1) as f64 * dy)
 }
 
-/// ISO Gaussian low-pass of `z` (zero at invalid pixels) with cutoff wavelength `lambda_mm`,
-/// renormalised over the valid pixels: G*(M z) / G*M at valid pixels (0 elsewhere).
-pub fn masked_gaussian(
-    z: &Array2<f64>,
-    valid: &Array2<bool>,
-    dx: f64,
-    dy: f64,
-    lambda_mm: f64,
-) -> Array2<f64> {
+/// `z` with its invalid pixels replaced by a smooth continuation: normalised Gaussian
+/// convolution at the smallest of the scales 4, 16, 64, ... pixels whose valid weight G*M at
+/// that pixel is at least 1 (one pixel's worth; the kernel peak is 1).
+pub fn fill_holes(z: &Array2<f64>, valid: &Array2<bool>, dx: f64, dy: f64) -> Array2<f64> {
     let m = valid.mapv(|v| if v { 1.0 } else { 0.0 });
     let mz = Array2::from_shape_fn(z.dim(), |ij| if valid[ij] { z[ij] } else { 0.0 });
-    let num = gaussian_2d(&mz, dx, dy, lambda_mm);
-    let den = gaussian_2d(&m, dx, dy, lambda_mm);
-    Array2::from_shape_fn(z.dim(), |ij| {
-        // At a valid pixel den >= its own kernel weight (the kernel peak, 1) > 0.
-        if valid[ij] && den[ij] > 0.0 {
-            num[ij] / den[ij]
+    let mut out = mz.clone();
+    let mut todo: Vec<(usize, usize)> = valid
+        .indexed_iter()
+        .filter(|(_, &v)| !v)
+        .map(|(ij, _)| ij)
+        .collect();
+    let longest = z.nrows().max(z.ncols()) as f64;
+    let mut px = 4.0;
+    while !todo.is_empty() {
+        let last = px >= 2.0 * longest;
+        let lam = px * dx.min(dy);
+        let num = gaussian_2d(&mz, dx, dy, lam);
+        let den = gaussian_2d(&m, dx, dy, lam);
+        todo.retain(|&ij| {
+            if den[ij] >= 1.0 || (last && den[ij] > 0.0) {
+                out[ij] = num[ij] / den[ij];
+                false
+            } else {
+                // At the last scale a pixel no kernel reaches keeps 0 (the mean).
+                !last
+            }
+        });
+        px *= 4.0;
+    }
+    out
+}
+
+/// 2-D orthonormal DCT-II of `a` (`inverse`: its inverse, the DCT-III), along rows then
+/// columns.
+fn dct2(a: &Array2<f64>, inverse: bool) -> Array2<f64> {
+    let r = dct_rows(a, inverse);
+    let t = r.t().as_standard_layout().into_owned();
+    let c = dct_rows(&t, inverse);
+    c.t().as_standard_layout().into_owned()
+}
+
+/// The low-pass of the map whose DCT is `c`: coefficients with radial frequency
+/// sqrt((k / (2 Nx dx))^2 + (l / (2 Ny dy))^2) < f kept, the rest zeroed, transformed back.
+fn radial_lowpass(c: &Array2<f64>, dx: f64, dy: f64, f: f64) -> Array2<f64> {
+    let (ny, nx) = c.dim();
+    let (ux, uy) = (1.0 / (2.0 * nx as f64 * dx), 1.0 / (2.0 * ny as f64 * dy));
+    let kept = Array2::from_shape_fn((ny, nx), |(l, k)| {
+        let (fx, fy) = (k as f64 * ux, l as f64 * uy);
+        if fx * fx + fy * fy < f * f {
+            c[(l, k)]
         } else {
             0.0
         }
-    })
+    });
+    dct2(&kept, true)
+}
+
+/// Orthonormal DCT-II (or its inverse) of every row, through a real FFT of length 2N of the
+/// row mirrored about its end: Y_k = 2 e^{i pi k / 2N} X_k for the unnormalised DCT-II X.
+fn dct_rows(a: &Array2<f64>, inverse: bool) -> Array2<f64> {
+    let (rows, n) = a.dim();
+    let p = 2 * n;
+    let mut planner = RealFftPlanner::<f64>::new();
+    let fwd: Arc<dyn RealToComplex<f64>> = planner.plan_fft_forward(p);
+    let inv: Arc<dyn ComplexToReal<f64>> = planner.plan_fft_inverse(p);
+    let tw: Vec<Complex<f64>> = (0..n)
+        .map(|k| Complex::from_polar(1.0, std::f64::consts::PI * k as f64 / p as f64))
+        .collect();
+    // Orthonormal scaling: s_0 = sqrt(1 / N), s_k = sqrt(2 / N).
+    let s0 = (1.0 / n as f64).sqrt();
+    let sk = (2.0 / n as f64).sqrt();
+    let src = a.as_standard_layout();
+    let src = src.as_slice().unwrap_or(&[]);
+    let mut out = vec![0.0; rows * n];
+    out.par_chunks_mut(n).enumerate().for_each_init(
+        || {
+            (
+                fwd.make_input_vec(),
+                fwd.make_output_vec(),
+                fwd.make_scratch_vec(),
+                inv.make_scratch_vec(),
+            )
+        },
+        |(buf, spec, fs, is): &mut (Vec<f64>, Vec<Complex<f64>>, _, _), (i, dst)| {
+            let x = &src[i * n..(i + 1) * n];
+            if !inverse {
+                buf[..n].copy_from_slice(x);
+                for (d, v) in buf[n..].iter_mut().zip(x.iter().rev()) {
+                    *d = *v;
+                }
+                // Lengths come from the plans, so these cannot fail.
+                let _ = fwd.process_with_scratch(buf, spec, fs);
+                for (k, d) in dst.iter_mut().enumerate() {
+                    // X_k = Re(e^{-i pi k / 2N} Y_k) / 2
+                    let xk = 0.5 * (spec[k] * tw[k].conj()).re;
+                    *d = xk * if k == 0 { s0 } else { sk };
+                }
+            } else {
+                // Unnormalised X_k from the orthonormal coefficients, then Y_k = 2 e^{..} X_k,
+                // Y_N = 0, and the inverse real FFT of the mirrored sequence.
+                for (k, c) in spec.iter_mut().enumerate().take(n) {
+                    let xk = x[k] / if k == 0 { s0 } else { sk };
+                    *c = tw[k] * (2.0 * xk);
+                }
+                spec[n] = Complex::new(0.0, 0.0);
+                spec[0].im = 0.0;
+                let _ = inv.process_with_scratch(spec, buf, is);
+                // realfft's inverse is unnormalised: divide by 2N; the mirrored sequence's
+                // energy is twice the row's, which the orthonormal scaling already accounts for.
+                let scale = 1.0 / p as f64;
+                for (d, v) in dst.iter_mut().zip(buf.iter()) {
+                    *d = v * scale;
+                }
+            }
+        },
+    );
+    Array2::from_shape_vec((rows, n), out).unwrap_or_else(|_| Array2::zeros((rows, n)))
 }
 
 /// Separable (un-normalised, peak 1) Gaussian convolution with zero outside the map.
@@ -381,55 +486,72 @@ mod tests {
     use super::*;
     use bonnetlab_surface::rng::Rng;
 
-    /// Brute-force normalised Gaussian filter at one pixel.
-    fn brute(
-        z: &Array2<f64>,
-        v: &Array2<bool>,
-        dx: f64,
-        dy: f64,
-        lam: f64,
-        i: usize,
-        j: usize,
-    ) -> f64 {
-        let s = gaussian_alpha() * lam;
-        let (mut num, mut den) = (0.0, 0.0);
-        for ((a, b), &ok) in v.indexed_iter() {
-            if ok {
-                let x = (b as f64 - j as f64) * dx / s;
-                let y = (a as f64 - i as f64) * dy / s;
-                let w = (-std::f64::consts::PI * (x * x + y * y)).exp();
-                num += w * z[(a, b)];
-                den += w;
-            }
-        }
-        num / den
+    /// Brute-force orthonormal DCT-II of a vector.
+    fn dct_brute(x: &[f64]) -> Vec<f64> {
+        let n = x.len();
+        (0..n)
+            .map(|k| {
+                let s: f64 = x
+                    .iter()
+                    .enumerate()
+                    .map(|(j, v)| {
+                        v * (std::f64::consts::PI * k as f64 * (2 * j + 1) as f64 / (2 * n) as f64)
+                            .cos()
+                    })
+                    .sum();
+                s * if k == 0 {
+                    (1.0 / n as f64).sqrt()
+                } else {
+                    (2.0 / n as f64).sqrt()
+                }
+            })
+            .collect()
     }
 
     #[test]
-    fn fft_filter_equals_brute_force_with_a_mask() {
+    fn dct_matches_brute_force_and_inverts() {
         let mut r = Rng::new(4);
-        let (ny, nx) = (23, 31);
-        let z = Array2::from_shape_fn((ny, nx), |_| r.normal());
-        let v = Array2::from_shape_fn((ny, nx), |(i, j)| (i * 7 + j * 3) % 11 != 0 && i + j > 3);
-        let zm = Array2::from_shape_fn((ny, nx), |ij| if v[ij] { z[ij] } else { 0.0 });
-        for lam in [0.05, 0.9, 3.0, 40.0] {
-            let f = masked_gaussian(&zm, &v, 0.1, 0.13, lam);
-            for (i, j) in [(0, 0), (5, 17), (22, 30), (11, 2)] {
-                if v[(i, j)] {
-                    let b = brute(&zm, &v, 0.1, 0.13, lam, i, j);
-                    assert!(
-                        (f[(i, j)] - b).abs() < 1e-9 * (1.0 + b.abs()),
-                        "{lam} ({i},{j}): {} vs {b}",
-                        f[(i, j)]
-                    );
+        for (ny, nx) in [(5, 8), (7, 13), (1, 4)] {
+            let a = Array2::from_shape_fn((ny, nx), |_| r.normal());
+            let d = dct_rows(&a, false);
+            for i in 0..ny {
+                let b = dct_brute(&a.row(i).to_vec());
+                for k in 0..nx {
+                    assert!((d[(i, k)] - b[k]).abs() < 1e-12, "{ny}x{nx} ({i},{k})");
                 }
             }
+            let back = dct2(&dct2(&a, false), true);
+            for (x, y) in back.iter().zip(a.iter()) {
+                assert!((x - y).abs() < 1e-12);
+            }
+            // Orthonormal: Parseval.
+            let e0: f64 = a.iter().map(|v| v * v).sum();
+            let e1: f64 = dct2(&a, false).iter().map(|v| v * v).sum();
+            assert!((e0 - e1).abs() < 1e-10 * e0);
         }
     }
 
     #[test]
-    fn transmission_is_half_at_the_cutoff() {
-        assert!((gaussian_lowpass_transmission(2.0, 2.0) - 0.5).abs() < 1e-15);
+    fn fill_keeps_valid_pixels_and_takes_local_means() {
+        let (ny, nx) = (40, 50);
+        let z = Array2::from_shape_fn((ny, nx), |(i, j)| (i + 2 * j) as f64);
+        let mut v = Array2::from_elem((ny, nx), true);
+        v[(20, 25)] = false;
+        for i in 0..ny {
+            for j in 0..5 {
+                v[(i, j)] = false;
+            }
+        }
+        let zm = Array2::from_shape_fn((ny, nx), |ij| if v[ij] { z[ij] } else { 0.0 });
+        let f = fill_holes(&zm, &v, 0.1, 0.1);
+        for (ij, &ok) in v.indexed_iter() {
+            if ok {
+                assert_eq!(f[ij], zm[ij]);
+            }
+        }
+        // A single-pixel hole in a plane: the symmetric local mean is the plane's value.
+        assert!((f[(20, 25)] - z[(20, 25)]).abs() < 1e-9, "{}", f[(20, 25)]);
+        assert!(f.iter().all(|v| v.is_finite()));
     }
 
     #[test]
