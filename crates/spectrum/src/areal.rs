@@ -150,7 +150,7 @@ pub fn band_split(
     let f_lo = 1.0 / field;
     let f_hi = 0.5 / dx.max(dy);
     out.measured_range_per_mm = Some([f_lo, f_hi]);
-    let fmt = |v: f64| crate::band::fmt_sig(v);
+    let fmt = |v: f64| crate::band::fmt_short(v);
     let below = |what: &str, edge: f64| {
         format!(
             "not resolvable: {what} (periods longer than {} mm) lies below the lowest measured \

@@ -30,6 +30,16 @@ pub(crate) fn check_band(f1: f64, f2: f64) -> Result<(), SpectrumError> {
     Ok(())
 }
 
+/// [`fmt_sig`] without trailing zeros ("3", "0.07", "8.333"), for reasons in prose.
+pub fn fmt_short(v: f64) -> String {
+    let s = fmt_sig(v);
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
 /// Band RMS (nm) of a one-sided 1-D PSD over [f1, f2] mm^-1, edges inclusive.
 pub fn band_rms(psd: &Psd1d, f1_per_mm: f64, f2_per_mm: f64) -> f64 {
     band_power(psd, f1_per_mm, f2_per_mm).sqrt()
@@ -92,26 +102,26 @@ pub fn band(psd: &Psd1d, f1_per_mm: f64, f2_per_mm: f64) -> Result<BandRms, Spec
         format!(
             "not resolvable: the band [{}, {}] 1/mm lies below this PSD's first unbiased \
              frequency {} 1/mm (lines {} mm long)",
-            fmt_sig(f1_per_mm),
-            fmt_sig(f2_per_mm),
-            fmt_sig(f_lo),
-            fmt_sig(1.0 / psd.df_per_mm)
+            fmt_short(f1_per_mm),
+            fmt_short(f2_per_mm),
+            fmt_short(f_lo),
+            fmt_short(1.0 / psd.df_per_mm)
         )
     } else if f1_per_mm > nyq {
         format!(
             "not resolvable: the band [{}, {}] 1/mm lies above the Nyquist frequency {} 1/mm \
              (sample spacing {} mm)",
-            fmt_sig(f1_per_mm),
-            fmt_sig(f2_per_mm),
-            fmt_sig(nyq),
-            fmt_sig(psd.spacing_mm)
+            fmt_short(f1_per_mm),
+            fmt_short(f2_per_mm),
+            fmt_short(nyq),
+            fmt_short(psd.spacing_mm)
         )
     } else {
         format!(
             "not resolvable: no PSD bin (df {} 1/mm) falls inside [{}, {}] 1/mm",
-            fmt_sig(psd.df_per_mm),
-            fmt_sig(f1_per_mm),
-            fmt_sig(f2_per_mm)
+            fmt_short(psd.df_per_mm),
+            fmt_short(f1_per_mm),
+            fmt_short(f2_per_mm)
         )
     };
     Ok(BandRms {

@@ -34,7 +34,7 @@ mod scan;
 pub mod window;
 
 pub use areal::{band_split, ArealBands, BAND_EDGES_DEFAULT_PER_MM};
-pub use band::{band, band_power, band_rms, fmt_sig, BandRms, MSF_DEFAULT_PER_MM};
+pub use band::{band, band_power, band_rms, fmt_short, fmt_sig, BandRms, MSF_DEFAULT_PER_MM};
 pub use convert::{to_gwyddion_w1, to_surfacetopography_c1d, ConvertedPsd};
 pub use error::SpectrumError;
 pub use form::remove_form;

@@ -99,7 +99,7 @@ pub fn ripple_from_psds(
     let df = y.df_per_mm;
     let nyq = y.freq_per_mm.last().copied().unwrap_or(0.0);
     let field = 1.0 / df;
-    let sig = crate::band::fmt_sig;
+    let sig = crate::band::fmt_short;
     if pitch_mm > field {
         return Err(SpectrumError::NotResolvable(format!(
             "the {} mm pitch is longer than the {} mm field (Y lines)",

@@ -149,7 +149,11 @@ fn bands_outside_the_measured_range_are_absent_with_a_reason() {
     let s = Surface::new(z, Some(0.001), Some(0.001)).unwrap();
     let b = band_split(&s, &[Term::Piston], BAND_EDGES_DEFAULT_PER_MM).unwrap();
     assert!(b.figure_rms_nm.is_none() && b.msf_rms_nm.is_none());
-    assert!(b.figure_reason.as_deref().unwrap().contains("0.07000 mm"));
+    assert!(b
+        .figure_reason
+        .as_deref()
+        .unwrap()
+        .contains("the valid field is 0.07 mm long"));
     assert!(b.msf_reason.as_deref().unwrap().contains("lowest measured"));
     assert!((b.fine_rms_nm.unwrap() / b.total_rms_nm - 1.0).abs() < 1e-12);
     let j = serde_json::to_value(&b).unwrap();
