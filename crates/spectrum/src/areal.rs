@@ -139,7 +139,9 @@ pub fn band_split(
         method: AREAL_METHOD.into(),
     };
     let (Some(dx), Some(dy)) = (s.dx_mm, s.dy_mm) else {
-        let why = "the pixel size is unknown, so no spatial frequency can be assigned".to_string();
+        let why = "not resolvable: the pixel size is unknown, so no spatial frequency can be \
+                   assigned"
+            .to_string();
         out.figure_reason = Some(why.clone());
         out.msf_reason = Some(why.clone());
         out.fine_reason = Some(why);
