@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use bonnetlab_spectrum::{
     band, band_split, check_limit, psd_x, psd_xy, psd_y, ripple_from_psds, to_gwyddion_w1,
     to_surfacetopography_c1d, ArealBands, BandRms, ConvertedPsd, Detrend, LimitCheck, LimitLine,
-    Psd1d, PsdOptions, Ripple, RippleOptions, SpectrumError, Window, MSF_DEFAULT_PER_MM,
+    Psd1d, PsdOptions, RadialPsd, Ripple, RippleOptions, SpectrumError, Window, MSF_DEFAULT_PER_MM,
 };
 use bonnetlab_surface::{Surface, SurfaceError, Term};
 use serde::Serialize;
@@ -72,6 +72,18 @@ pub struct Args {
     /// Longest dropout (pixels) inside a line that is filled by linear interpolation.
     #[arg(long, default_value_t = 5)]
     pub max_gap_px: usize,
+    /// Shortest line segment analysed, pixels. Every segment at least this long is used, each
+    /// from its own first unbiased bin (ceil(b N / m) for a segment of m of N samples) up.
+    #[arg(long, default_value_t = 8)]
+    pub min_segment_px: usize,
+    /// Also skip segments shorter than this fraction of the line (0 = use every segment; 0.5
+    /// reproduces the segment choice before issue #19, for comparisons).
+    #[arg(long, default_value_t = 0.0)]
+    pub min_segment_fraction: f64,
+    /// Also compute the 2-D PSD's radial forms (JSON `radial`: azimuthal average, two-sided
+    /// nm^2 mm^2, and azimuthally integrated, nm^2 mm).
+    #[arg(long)]
+    pub radial: bool,
     /// Highest ripple harmonic considered.
     #[arg(long, default_value_t = 5)]
     pub harmonics: usize,
@@ -133,6 +145,17 @@ pub struct AxisReport {
     pub converted: Option<ConvertedPsd>,
 }
 
+/// The radial PSD in the JSON output.
+#[derive(Debug, Clone, Serialize)]
+pub struct RadialReport {
+    pub window: Window,
+    /// Invalid pixels enter the 2-D FFT as 0 after the mean is removed; the normalisation uses
+    /// the window energy over valid pixels only.
+    pub masking: &'static str,
+    #[serde(flatten)]
+    pub psd: RadialPsd,
+}
+
 /// The JSON object printed by `psd --json`.
 #[derive(Debug, Clone, Serialize)]
 pub struct PsdReport {
@@ -156,6 +179,9 @@ pub struct PsdReport {
     /// With `--pitch-mm` on a map that cannot resolve the pitch: why `ripple` is absent.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ripple_reason: Option<String>,
+    /// With `--radial`: the radial forms of the 2-D PSD (same window and removed terms).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radial: Option<RadialReport>,
     /// Band RMS of the map itself over the MSF edges (figure / MSF / fine, areal split; they
     /// add up to the RMS after `removed`).
     pub bands: ArealBands,
@@ -211,7 +237,15 @@ fn options(args: &Args) -> Result<PsdOptions, CliError> {
             DetrendArg::Linear => Detrend::Linear,
         },
         max_gap_px: args.max_gap_px,
-        ..PsdOptions::default()
+        min_segment_px: args.min_segment_px,
+        min_segment_fraction: if (0.0..=1.0).contains(&args.min_segment_fraction) {
+            args.min_segment_fraction
+        } else {
+            return Err(CliError::usage(format!(
+                "--min-segment-fraction must lie in [0, 1], got {}",
+                args.min_segment_fraction
+            )));
+        },
     })
 }
 
@@ -357,6 +391,16 @@ fn analyse(
         _ => (None, None),
     };
     let bands = band_split(s, &opts.remove, msf).map_err(err)?;
+    let radial = if args.radial {
+        Some(RadialReport {
+            window: opts.window,
+            masking: "invalid pixels are 0 after mean removal; normalised by the window \
+                      energy over the valid pixels",
+            psd: bonnetlab_spectrum::psd_2d(s, opts).map_err(err)?.radial(),
+        })
+    } else {
+        None
+    };
     let axis_report = |p: &Psd1d| -> Result<AxisReport, CliError> {
         let nyq = p.freq_per_mm.last().copied().unwrap_or(0.0);
         let all = band(p, 0.0, nyq).map_err(err)?;
@@ -427,6 +471,7 @@ fn analyse(
         y: yr,
         ripple,
         ripple_reason,
+        radial,
         bands,
     })
 }
