@@ -239,12 +239,25 @@ fn bad_input_is_one_line_naming_the_file() {
     let f = noise_map(dir.path());
     let out = bonnetlab(&["psd", f.to_str().unwrap(), "--window", "kaiser"]);
     assert_eq!(out.status.code(), Some(2));
+    // A pitch shorter than two pixels is valid input the map cannot resolve: the PSDs are
+    // printed and the ripple is absent with the reason (issue #17).
     let out = bonnetlab(&["psd", f.to_str().unwrap(), "--pitch-mm", "0.1"]);
-    assert_eq!(
-        out.status.code(),
-        Some(2),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("ripple along Y: absent (not resolvable: the 0.1 mm pitch is shorter")
+            && text.contains("Nyquist"),
+        "{text}"
     );
-    assert!(String::from_utf8_lossy(&out.stderr).contains("Nyquist"));
+    let v = json(&bonnetlab(&[
+        "psd",
+        f.to_str().unwrap(),
+        "--pitch-mm",
+        "0.1",
+        "--json",
+    ]));
+    assert!(
+        v.get("ripple").is_none() && v["ripple_reason"].is_string(),
+        "{v}"
+    );
 }

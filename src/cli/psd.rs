@@ -4,17 +4,21 @@
 //! Reads one map, removes the form terms jointly (default piston, tilt), and prints the
 //! ONE-SIDED 1-D PSDs along X (rows) and Y (columns) in nm^2 mm with their band RMS values;
 //! with `--pitch-mm`, the ripple check at f0 = 1/pitch in the Y PSD. Every printed number
-//! carries its band, window and removed terms. `--json` prints one JSON object (stable field
-//! order, no time stamps); `--csv` writes the spectra in long form; `--plot` draws both PSDs
-//! log-log with the grating frequency and its harmonics marked.
+//! carries its band, window and removed terms; a number that cannot be computed (a band outside
+//! the PSD's range, a pitch the field cannot resolve) is absent (JSON null) with its reason.
+//! The per-axis `msf` values integrate the windowed PSD (labelled `band_method`); the band RMS
+//! of the map itself (areal split, adding up to Sq) is the top-level `bands` object.
+//! `--json` prints one JSON object (stable field order, no time stamps); `--csv` writes the
+//! spectra in long form; `--plot` draws both PSDs log-log with the grating frequency and its
+//! harmonics marked.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use bonnetlab_spectrum::{
-    band, check_limit, psd_x, psd_xy, psd_y, ripple_from_psds, to_gwyddion_w1,
-    to_surfacetopography_c1d, BandRms, ConvertedPsd, Detrend, LimitCheck, LimitLine, Psd1d,
-    PsdOptions, Ripple, RippleOptions, SpectrumError, Window, MSF_DEFAULT_PER_MM,
+    band, band_split, check_limit, psd_x, psd_xy, psd_y, ripple_from_psds, to_gwyddion_w1,
+    to_surfacetopography_c1d, ArealBands, BandRms, ConvertedPsd, Detrend, LimitCheck, LimitLine,
+    Psd1d, PsdOptions, RadialPsd, Ripple, RippleOptions, SpectrumError, Window, MSF_DEFAULT_PER_MM,
 };
 use bonnetlab_surface::{Surface, SurfaceError, Term};
 use serde::Serialize;
@@ -68,6 +72,18 @@ pub struct Args {
     /// Longest dropout (pixels) inside a line that is filled by linear interpolation.
     #[arg(long, default_value_t = 5)]
     pub max_gap_px: usize,
+    /// Shortest line segment analysed, pixels. Every segment at least this long is used, each
+    /// from its own first unbiased bin (ceil(b N / m) for a segment of m of N samples) up.
+    #[arg(long, default_value_t = 8)]
+    pub min_segment_px: usize,
+    /// Also skip segments shorter than this fraction of the line (0 = use every segment; 0.5
+    /// reproduces the segment choice before issue #19, for comparisons).
+    #[arg(long, default_value_t = 0.0)]
+    pub min_segment_fraction: f64,
+    /// Also compute the 2-D PSD's radial forms (JSON `radial`: azimuthal average, two-sided
+    /// nm^2 mm^2, and azimuthally integrated, nm^2 mm).
+    #[arg(long)]
+    pub radial: bool,
     /// Highest ripple harmonic considered.
     #[arg(long, default_value_t = 5)]
     pub harmonics: usize,
@@ -115,13 +131,29 @@ pub struct AxisReport {
     pub n_segments: usize,
     /// Bins below this index are biased by detrending.
     pub biased_bins: usize,
-    /// RMS over all unbiased bins up to Nyquist, nm.
-    pub rms_unbiased_nm: f64,
+    /// RMS over all unbiased bins up to Nyquist, nm (null with `msf.reason`-style text in
+    /// `rms_unbiased_reason` when the PSD has no unbiased bin).
+    pub rms_unbiased_nm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rms_unbiased_reason: Option<String>,
+    /// PSD-integrated MSF band RMS (bin sums of this windowed PSD; not the map's band RMS).
     pub msf: BandRms,
+    pub band_method: &'static str,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub limit: Option<LimitCheck>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub converted: Option<ConvertedPsd>,
+}
+
+/// The radial PSD in the JSON output.
+#[derive(Debug, Clone, Serialize)]
+pub struct RadialReport {
+    pub window: Window,
+    /// Invalid pixels enter the 2-D FFT as 0 after the mean is removed; the normalisation uses
+    /// the window energy over valid pixels only.
+    pub masking: &'static str,
+    #[serde(flatten)]
+    pub psd: RadialPsd,
 }
 
 /// The JSON object printed by `psd --json`.
@@ -144,6 +176,15 @@ pub struct PsdReport {
     pub y: Option<AxisReport>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ripple: Option<Ripple>,
+    /// With `--pitch-mm` on a map that cannot resolve the pitch: why `ripple` is absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ripple_reason: Option<String>,
+    /// With `--radial`: the radial forms of the 2-D PSD (same window and removed terms).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radial: Option<RadialReport>,
+    /// Band RMS of the map itself over the MSF edges (figure / MSF / fine, areal split; they
+    /// add up to the RMS after `removed`).
+    pub bands: ArealBands,
 }
 
 pub fn run(args: &Args) -> Result<(), CliError> {
@@ -196,7 +237,15 @@ fn options(args: &Args) -> Result<PsdOptions, CliError> {
             DetrendArg::Linear => Detrend::Linear,
         },
         max_gap_px: args.max_gap_px,
-        ..PsdOptions::default()
+        min_segment_px: args.min_segment_px,
+        min_segment_fraction: if (0.0..=1.0).contains(&args.min_segment_fraction) {
+            args.min_segment_fraction
+        } else {
+            return Err(CliError::usage(format!(
+                "--min-segment-fraction must lie in [0, 1], got {}",
+                args.min_segment_fraction
+            )));
+        },
     })
 }
 
@@ -216,7 +265,7 @@ fn parse_numbers(s: &str, flag: &str) -> Result<Vec<f64>, CliError> {
         .collect()
 }
 
-fn parse_pair(s: Option<&str>, flag: &str) -> Result<Option<(f64, f64)>, CliError> {
+pub(crate) fn parse_pair(s: Option<&str>, flag: &str) -> Result<Option<(f64, f64)>, CliError> {
     let Some(s) = s else { return Ok(None) };
     let v = parse_numbers(s, flag)?;
     match v.as_slice() {
@@ -327,15 +376,30 @@ fn analyse(
         .or(y.as_ref())
         .map(|p| p.removed.clone())
         .unwrap_or_default();
-    let ripple = match (args.pitch_mm, &x, &y) {
+    let (ripple, ripple_reason) = match (args.pitch_mm, &x, &y) {
         (Some(p), Some(px), Some(py)) => {
             let ropts = RippleOptions {
                 harmonics: args.harmonics,
                 prominence_threshold_db: args.prominence_threshold_db,
             };
-            Some(ripple_from_psds(px, py, p, &ropts).map_err(err)?)
+            match ripple_from_psds(px, py, p, &ropts) {
+                Ok(r) => (Some(r), None),
+                Err(e @ SpectrumError::NotResolvable(_)) => (None, Some(e.to_string())),
+                Err(e) => return Err(err(e)),
+            }
         }
-        _ => None,
+        _ => (None, None),
+    };
+    let bands = band_split(s, &opts.remove, msf).map_err(err)?;
+    let radial = if args.radial {
+        Some(RadialReport {
+            window: opts.window,
+            masking: "invalid pixels are 0 after mean removal; normalised by the window \
+                      energy over the valid pixels",
+            psd: bonnetlab_spectrum::psd_2d(s, opts).map_err(err)?.radial(),
+        })
+    } else {
+        None
     };
     let axis_report = |p: &Psd1d| -> Result<AxisReport, CliError> {
         let nyq = p.freq_per_mm.last().copied().unwrap_or(0.0);
@@ -352,7 +416,10 @@ fn analyse(
             n_segments: p.n_segments,
             biased_bins: p.biased_bins,
             rms_unbiased_nm: all.rms_nm,
+            rms_unbiased_reason: all.reason,
             msf: band(p, msf.0, msf.1).map_err(err)?,
+            band_method: "PSD-integrated: bin sums of this one-sided windowed PSD over the \
+                          unbiased bins in the band (a PSD quantity, not the map's band RMS)",
             // An open upper edge means "up to Nyquist".
             limit: limit
                 .map(|l| {
@@ -382,11 +449,12 @@ fn analyse(
         (Some(p), true) => Some(axis_report(p)?),
         _ => None,
     };
+    // Lines of X when X is reported, else of Y (at least one axis is always computed).
     let enbw = xr
         .as_ref()
         .or(yr.as_ref())
         .map(|a| a.enbw_bins)
-        .unwrap_or(f64::NAN);
+        .unwrap_or_else(|| opts.window.enbw_bins(s.cols()));
     Ok(PsdReport {
         file: file.display().to_string(),
         format: s.provenance.format.clone(),
@@ -402,6 +470,9 @@ fn analyse(
         x: xr,
         y: yr,
         ripple,
+        ripple_reason,
+        radial,
+        bands,
     })
 }
 
@@ -443,23 +514,29 @@ fn summary(r: &PsdReport) -> String {
     for (name, a) in [("X (rows)", &r.x), ("Y (columns)", &r.y)] {
         let Some(a) = a else { continue };
         line(format!(
-            "{name}: {} lines, {} segments, df {:.6} mm^-1, RMS above bin {} (unbiased) {:.4} nm",
-            a.n_lines, a.n_segments, a.df_per_mm, a.biased_bins, a.rms_unbiased_nm
+            "{name}: {} lines, {} segments, df {:.6} mm^-1, first unbiased bin {}",
+            a.n_lines, a.n_segments, a.df_per_mm, a.biased_bins
         ));
-        if a.msf.f1_used_per_mm > a.msf.f2_used_per_mm {
-            line(format!(
-                "  MSF band [{:.6}, {:.6}] mm^-1: outside this PSD's unbiased range",
+        match (a.rms_unbiased_nm, &a.rms_unbiased_reason) {
+            (Some(v), _) => line(format!(
+                "  PSD-integrated RMS over the unbiased bins: {v:.4} nm"
+            )),
+            (None, why) => line(format!(
+                "  PSD-integrated RMS over the unbiased bins: absent ({})",
+                why.as_deref().unwrap_or("no unbiased bin")
+            )),
+        }
+        match (a.msf.rms_nm, a.msf.f1_used_per_mm, a.msf.f2_used_per_mm) {
+            (Some(v), Some(lo), Some(hi)) => line(format!(
+                "  PSD-integrated MSF band [{:.6}, {:.6}] mm^-1 (used [{lo:.6}, {hi:.6}]): {v:.4} nm",
                 a.msf.f1_per_mm, a.msf.f2_per_mm
-            ));
-        } else {
-            line(format!(
-                "  MSF band [{:.6}, {:.6}] mm^-1 (used [{:.6}, {:.6}]): {:.4} nm",
+            )),
+            _ => line(format!(
+                "  PSD-integrated MSF band [{:.6}, {:.6}] mm^-1: absent ({})",
                 a.msf.f1_per_mm,
                 a.msf.f2_per_mm,
-                a.msf.f1_used_per_mm,
-                a.msf.f2_used_per_mm,
-                a.msf.rms_nm
-            ));
+                a.msf.reason.as_deref().unwrap_or("not computed")
+            )),
         }
         if let Some(l) = &a.limit {
             line(format!(
@@ -475,6 +552,13 @@ fn summary(r: &PsdReport) -> String {
             ));
         }
     }
+    line("band RMS of the map (areal split, adds up to the RMS):".into());
+    for l in super::stats::bands_table(&r.bands).lines() {
+        line(format!("  {l}"));
+    }
+    if let Some(why) = &r.ripple_reason {
+        line(format!("ripple along Y: absent ({why})"));
+    }
     if let Some(rp) = &r.ripple {
         line(format!(
             "ripple along Y at pitch {} mm (f0 {:.6} mm^-1, bands |f - k f0| <= {:.6} mm^-1):",
@@ -485,19 +569,8 @@ fn summary(r: &PsdReport) -> String {
             rp.sigma1_nm, rp.sigma_total_nm, rp.a_eq_nm, rp.pv_eq_nm
         ));
         line(format!(
-            "  prominence {:.2} dB over the flanking median (threshold {} dB): {}{}",
-            rp.prominence_db,
-            rp.prominence_threshold_db,
-            if rp.detected {
-                "DETECTED"
-            } else {
-                "not detected"
-            },
-            if rp.biased {
-                " (band reaches the biased lowest bins)"
-            } else {
-                ""
-            }
+            "  {} (prominence over the flanking median)",
+            rp.verdict
         ));
         line(format!(
             "  Y/X at f0: {}",

@@ -1,12 +1,17 @@
-//! `bonnetlab stats FILE [--remove TERMS] [--json] [--pvr]` (contract: shared/spec/interfaces.md).
+//! `bonnetlab stats FILE [--remove TERMS] [--json] [--pvr] [--bands [F1,F2]]` (contract:
+//! shared/spec/interfaces.md).
 //!
 //! Reads one map (format detected by content), removes the requested terms jointly, and prints
 //! the height parameters of the residual over the valid pixels: a JSON object with `--json`
-//! (stable field order, no time stamps), a small table otherwise.
+//! (stable field order, no time stamps), a small table otherwise. With `--bands`, also the
+//! figure / MSF / fine band RMS of the same residual (`bonnetlab_spectrum::band_split`: areal
+//! Gaussian filters, bands that add up to Sq exactly; a band the map cannot resolve is null
+//! with a reason).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use bonnetlab_spectrum::{band_split, ArealBands, BAND_EDGES_DEFAULT_PER_MM};
 use bonnetlab_surface::{
     height_stats, pvr, remove_terms, HeightStats, Surface, SurfaceError, Term, PVR_SET,
 };
@@ -29,6 +34,11 @@ pub struct Args {
     /// Also compute PVr (Evans 2008: PV of a 37-term Fringe Zernike fit + 3 x residual RMS).
     #[arg(long)]
     pub pvr: bool,
+    /// Band RMS: figure below F1, MSF from F1 to F2, fine above F2 (cycles/mm; `1/33` style
+    /// allowed). Without a value: 1/33,1/0.12 (periods 33 mm and 0.12 mm, the large-optics
+    /// MSF convention of shared/spec/metrology.md).
+    #[arg(long, value_name = "F1,F2", num_args = 0..=1, default_missing_value = "default")]
+    pub bands: Option<String>,
 }
 
 /// The JSON object printed by `stats --json` (field names are the CLI contract).
@@ -54,6 +64,9 @@ pub struct StatsReport {
     pub pvr_nm: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pvr_set: Option<&'static str>,
+    /// With `--bands`: the band RMS object of shared/spec/interfaces.md.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bands: Option<ArealBands>,
 }
 
 /// Maps a library error on a readable map to the CLI's exit codes: a map with too few valid
@@ -91,6 +104,17 @@ pub fn stats_report(
     terms: &[Term],
     with_pvr: bool,
 ) -> Result<StatsReport, CliError> {
+    stats_report_with_bands(file, s, terms, with_pvr, None)
+}
+
+/// [`stats_report`] with, when `bands` gives edges (mm^-1), the band RMS object.
+pub fn stats_report_with_bands(
+    file: &Path,
+    s: &Surface,
+    terms: &[Term],
+    with_pvr: bool,
+    bands: Option<(f64, f64)>,
+) -> Result<StatsReport, CliError> {
     if s.valid_count() == 0 {
         return Err(CliError::processing(file, SurfaceError::NoValidPixel));
     }
@@ -101,6 +125,11 @@ pub fn stats_report(
     } else {
         None
     };
+    // The split removes the same terms from the original map (one joint fit, as above).
+    let bands = bands
+        .map(|edges| band_split(s, terms, edges))
+        .transpose()
+        .map_err(|e| CliError::processing(file, e))?;
     Ok(StatsReport {
         file: file.display().to_string(),
         format: s.provenance.format.clone(),
@@ -120,6 +149,7 @@ pub fn stats_report(
         sku: st.sku,
         pvr_nm: p.map(|p| p.pvr_nm),
         pvr_set: p.map(|_| PVR_SET),
+        bands,
     })
 }
 
@@ -153,14 +183,60 @@ fn table(r: &StatsReport) -> String {
     if let (Some(p), Some(set)) = (r.pvr_nm, r.pvr_set) {
         t += &format!("PVr       {p:>12.4} nm   ({set})\n");
     }
+    if let Some(b) = &r.bands {
+        t += &bands_table(b);
+    }
+    t
+}
+
+/// The band lines of the table: edges, each band's RMS or why it is absent, and the method.
+pub fn bands_table(b: &ArealBands) -> String {
+    let [f1, f2] = b.edges_per_mm;
+    let sig = bonnetlab_spectrum::fmt_sig;
+    let mut t = format!(
+        "bands     edges {} and {} 1/mm (periods {} mm and {} mm)\n",
+        sig(f1),
+        sig(f2),
+        if f1 > 0.0 {
+            sig(1.0 / f1)
+        } else {
+            "inf".into()
+        },
+        if f2 > 0.0 {
+            sig(1.0 / f2)
+        } else {
+            "inf".into()
+        }
+    );
+    for (name, v, why) in b.bands() {
+        let label = match name {
+            "figure" => format!("  figure  (f < {} 1/mm)", sig(f1)),
+            "msf" => format!("  MSF     ({} to {} 1/mm)", sig(f1), sig(f2)),
+            _ => format!("  fine    (f > {} 1/mm)", sig(f2)),
+        };
+        match (v, why) {
+            (Some(v), _) => t += &format!("{label:<34} {v:>12.4} nm\n"),
+            (None, Some(why)) => t += &format!("{label:<34} absent: {why}\n"),
+            (None, None) => t += &format!("{label:<34} absent\n"),
+        }
+    }
+    t += &format!(
+        "  total (Sq, quadrature sum)       {:>12.4} nm\n  method: {}\n",
+        b.total_rms_nm, b.method
+    );
     t
 }
 
 pub fn run(args: &Args) -> Result<(), CliError> {
     let terms =
         Term::parse_list(&args.remove).map_err(|e| CliError::usage(format!("--remove: {e}")))?;
+    let bands = match args.bands.as_deref() {
+        None => None,
+        Some("default") => Some(BAND_EDGES_DEFAULT_PER_MM),
+        Some(v) => super::psd::parse_pair(Some(v), "--bands")?,
+    };
     let s = read_map(&args.file)?;
-    let report = stats_report(&args.file, &s, &terms, args.pvr)?;
+    let report = stats_report_with_bands(&args.file, &s, &terms, args.pvr, bands)?;
     let text = if args.json {
         let mut j = serde_json::to_string(&report)
             .map_err(|e| CliError::processing(&args.file, format!("cannot encode JSON: {e}")))?;

@@ -8,7 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::comparison::{fmt_sig, Comparison, RunResult};
+use super::comparison::{fmt_sig, BandCr, Comparison, RunResult};
 use super::html::{Page, Table};
 use super::maps::{false_colour_png_with, valid_range, MapOptions};
 use super::msf_prediction::PredictedMsf;
@@ -291,7 +291,7 @@ fn noise_section(page: &mut Page, c: &Comparison) {
 
 fn bands_section(page: &mut Page, c: &Comparison) {
     page.section("Convergence per spatial-frequency band");
-    let mut t = Table::new([
+    let header = [
         "run",
         "band",
         "edges (1/mm)",
@@ -299,30 +299,66 @@ fn bands_section(page: &mut Page, c: &Comparison) {
         "RMS before (nm)",
         "RMS after (nm)",
         "CR",
-        "how measured",
-    ]);
+        "how measured / why absent",
+    ];
+    let mut t = Table::new(header).caption(
+        "Band RMS of the maps themselves (areal Gaussian split on the run's aperture): figure, \
+         MSF and fine add up in quadrature to the RMS of the summary table. A band the maps \
+         cannot resolve is absent, with the reason.",
+    );
     for r in &c.runs {
-        for b in &r.bands {
-            let period = |f: f64| {
-                if f > 0.0 {
-                    fmt_sig(1.0 / f)
-                } else {
-                    "\u{221e}".into()
-                }
-            };
-            t.row([
-                r.name.clone(),
-                b.band.clone(),
-                format!("{} to {}", fmt_sig(b.f1_per_mm), fmt_sig(b.f2_per_mm)),
-                format!("{} to {}", period(b.f1_per_mm), period(b.f2_per_mm)),
-                nm(b.rms_before_nm),
-                nm(b.rms_after_nm),
-                pct(b.cr),
-                b.method.clone(),
-            ]);
+        let (main, ripple): (Vec<&BandCr>, Vec<&BandCr>) =
+            r.bands.iter().partition(|b| b.band != "ripple");
+        for b in main.into_iter().chain([&r.band_fine]).chain(ripple) {
+            t.row(band_row(&r.name, b));
         }
     }
     page.table(&t);
+    let mut p = Table::new(header).caption(
+        "For reference, a PSD quantity: the same edges integrated over the windowed 2-D PSD \
+         (annulus sums). The window's loss on non-stationary maps makes these disagree with \
+         the map RMS; read the table above for band RMS.",
+    );
+    for r in &c.runs {
+        for b in &r.bands_psd {
+            p.row(band_row(&r.name, b));
+        }
+    }
+    page.table(&p);
+}
+
+/// One row of a band table: values or "absent", and the reason.
+fn band_row(run: &str, b: &BandCr) -> Vec<String> {
+    let period = |f: f64| {
+        if f > 0.0 {
+            fmt_sig(1.0 / f)
+        } else {
+            "\u{221e}".into()
+        }
+    };
+    let opt_nm = |v: Option<f64>| v.map(nm).unwrap_or_else(|| "absent".into());
+    let (f1, f2) = (b.f1_per_mm, b.f2_per_mm);
+    let (edges, periods) = if f2 > f1 {
+        (
+            format!("{} to {}", fmt_sig(f1), fmt_sig(f2)),
+            format!("{} to {}", period(f1), period(f2)),
+        )
+    } else {
+        (fmt_sig(f1), period(f1))
+    };
+    vec![
+        run.to_string(),
+        b.band.clone(),
+        edges,
+        periods,
+        opt_nm(b.rms_before_nm),
+        opt_nm(b.rms_after_nm),
+        b.cr.map(pct).unwrap_or_else(|| "absent".into()),
+        match &b.reason {
+            Some(why) => format!("{}; {why}", b.method),
+            None => b.method.clone(),
+        },
+    ]
 }
 
 fn ripple_section(page: &mut Page, c: &Comparison) {
@@ -349,7 +385,7 @@ fn ripple_section(page: &mut Page, c: &Comparison) {
                     nm(p.a_eq_nm),
                     nm(p.pv_eq_nm),
                     format!("{:.1}", p.prominence_db),
-                    if p.detected { "yes" } else { "no" }.to_string(),
+                    p.verdict.clone(),
                     p.y_over_x
                         .map(|v| format!("{v:.2}"))
                         .unwrap_or_else(|| "n/a".into()),
@@ -358,6 +394,11 @@ fn ripple_section(page: &mut Page, c: &Comparison) {
         }
     }
     page.table(&t);
+    for r in &c.runs {
+        if let Some(why) = &r.ripple_reason {
+            page.paragraph(&format!("{}: ripple absent ({why}).", r.name));
+        }
+    }
     if let Some(p) = c.runs.iter().find_map(|r| r.ripple_before.as_ref()) {
         page.note(&format!(
             "f0 = 1/{} mm = {} 1/mm; sigma_k = band RMS of the one-sided Y PSD over |f - k f0| <= {} 1/mm, \

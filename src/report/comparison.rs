@@ -14,8 +14,12 @@
 //!   standard deviation;
 //! - PSDs are one-sided 1-D PSDs in nm^2 mm (bonnetlab_spectrum), averaged over repeats; the
 //!   ripple is computed from the averaged X and Y PSDs;
-//! - band CRs use the 2-D PSD's annulus RMS (all directions) over stated edges, and the ripple
-//!   band's CR uses the ripple's sigma_total (Y PSD, harmonic bands).
+//! - band RMS values (figure below F1, MSF F1..F2, fine above F2) are the areal split of the
+//!   map itself (`bonnetlab_spectrum::band_split`: ISO Gaussian filters honouring the
+//!   aperture; the bands add up to the map RMS exactly); a band the map cannot resolve is
+//!   absent with a reason. The 2-D PSD annulus values (Hann window) stay as a labelled PSD
+//!   quantity (`bands_psd`); the ripple band's CR uses the ripple's sigma_total (Y PSD,
+//!   harmonic bands), absent with a reason when the pitch cannot be resolved.
 
 use std::path::{Path, PathBuf};
 
@@ -24,7 +28,8 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use bonnetlab_spectrum::{
-    psd_2d, psd_xy, ripple_from_psds, Psd1d, PsdOptions, Ripple, RippleOptions, Window,
+    band_split, psd_2d, psd_xy, ripple_from_psds, ArealBands, Psd1d, PsdOptions, Ripple,
+    RippleOptions, SpectrumError, Window,
 };
 use bonnetlab_surface::{
     compare_runs, height_stats, remove_terms, repeat_cr, RunComparison, Surface, Term,
@@ -104,19 +109,64 @@ impl CompareError {
     }
 }
 
-/// One band's RMS before / after and its convergence ratio.
+/// One band's RMS before / after and its convergence ratio. A value that cannot be computed
+/// is `None` (JSON null) and `reason` says why.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct BandCr {
-    /// `figure`, `msf` or `ripple`.
+    /// `figure`, `msf`, `fine` or `ripple`.
     pub band: String,
-    /// Edges in mm^-1 (for `ripple`: f0 - h to K f0 + h, in harmonic bands only).
+    /// Edges in mm^-1 as used (clipped to the measured range; for `ripple`: f0 - h to
+    /// K f0 + h, in harmonic bands only).
     pub f1_per_mm: f64,
     pub f2_per_mm: f64,
     /// How the band RMS is measured.
     pub method: String,
-    pub rms_before_nm: f64,
-    pub rms_after_nm: f64,
-    pub cr: f64,
+    pub rms_before_nm: Option<f64>,
+    pub rms_after_nm: Option<f64>,
+    pub cr: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+}
+
+impl BandCr {
+    /// A band with before / after values (means over repeats) or the reason they are absent.
+    fn new(
+        band: &str,
+        edges: (f64, f64),
+        method: String,
+        before: Result<f64, String>,
+        after: Result<f64, String>,
+    ) -> Self {
+        let (rms_before_nm, rms_after_nm, reason) = match (before, after) {
+            (Ok(b), Ok(a)) => (Some(b), Some(a), None),
+            (Err(e), _) | (_, Err(e)) => (None, None, Some(e)),
+        };
+        let (cr, reason) = match (rms_before_nm, rms_after_nm) {
+            (Some(b), Some(a)) if b > 0.0 => (Some((b - a) / b), reason),
+            (Some(_), Some(_)) => (
+                None,
+                Some("no CR: the band RMS before is 0 nm (nothing to converge)".to_string()),
+            ),
+            _ => (None, reason),
+        };
+        BandCr {
+            band: band.into(),
+            f1_per_mm: edges.0,
+            f2_per_mm: edges.1,
+            method,
+            rms_before_nm,
+            rms_after_nm,
+            cr,
+            reason,
+        }
+    }
+}
+
+/// The areal band RMS of every map of a run, in the order given.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunBandRms {
+    pub before: Vec<ArealBands>,
+    pub after: Vec<ArealBands>,
 }
 
 /// Spread of a run's metrics over its repeat measurements (sample sd; CR sd propagated).
@@ -180,11 +230,21 @@ pub struct RunResult {
     pub pv_before_each_nm: Vec<f64>,
     pub pv_after_each_nm: Vec<f64>,
     pub spread: Option<RunSpread>,
+    /// figure, MSF (areal band RMS, means over repeats) and ripple.
     pub bands: Vec<BandCr>,
+    /// The fine band (above F2) of the same areal split.
+    pub band_fine: BandCr,
+    /// Every map's areal band RMS object (as `stats --bands` writes it).
+    pub band_rms: RunBandRms,
+    /// figure / MSF by the 2-D PSD's annulus sums (windowed): a labelled PSD quantity.
+    pub bands_psd: Vec<BandCr>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ripple_before: Option<Ripple>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ripple_after: Option<Ripple>,
+    /// With a pitch the maps cannot resolve: why there is no ripple.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ripple_reason: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub improvement_cr_rms: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -232,6 +292,8 @@ pub struct SettingsReport {
     pub window: String,
     pub pitch_mm: Option<f64>,
     pub psd: String,
+    /// How the band RMS values of `bands` are measured.
+    pub band_method: String,
     pub figure_band_per_mm: (f64, f64),
     pub msf_band_per_mm: (f64, f64),
     pub harmonics: usize,
@@ -245,8 +307,10 @@ struct MapResult {
     pv_nm: f64,
     px: Psd1d,
     py: Psd1d,
-    figure_rms_nm: f64,
-    msf_rms_nm: f64,
+    /// 2-D PSD annulus values (PSD quantity).
+    figure_psd_nm: f64,
+    msf_psd_nm: f64,
+    bands: ArealBands,
     /// The map on the aperture with the terms removed (kept for the pictures).
     residual: Surface,
 }
@@ -328,6 +392,7 @@ fn settings_report(s: &Settings) -> SettingsReport {
         window: s.window.name(),
         pitch_mm: s.pitch_mm,
         psd: "one-sided 1-D PSD, nm^2 mm, averaged over lines and over repeat maps".into(),
+        band_method: bonnetlab_spectrum::areal::AREAL_METHOD.into(),
         figure_band_per_mm: (0.0, s.msf_band_per_mm.0),
         msf_band_per_mm: s.msf_band_per_mm,
         harmonics: s.harmonics,
@@ -437,76 +502,124 @@ fn analyse_run(
         y_before: Some(mean_psd(mb.iter().map(|m| &m.py))),
         y_after: Some(mean_psd(ma.iter().map(|m| &m.py))),
     };
-    let (fig_b, fig_a) = (
-        mean(&each(mb, |m| m.figure_rms_nm)),
-        mean(&each(ma, |m| m.figure_rms_nm)),
-    );
-    let (msf_b, msf_a) = (
-        mean(&each(mb, |m| m.msf_rms_nm)),
-        mean(&each(ma, |m| m.msf_rms_nm)),
-    );
     let nyq = 0.5 / dx.max(dy);
     let msf_hi = settings.msf_band_per_mm.1.min(nyq);
-    let method_2d = format!("2-D PSD annulus RMS, {} window", settings.window.name());
+    let (f1, f2) = settings.msf_band_per_mm;
+    // Areal band RMS: mean over repeats, or absent with the first map's reason.
+    let areal = |m: &[MapResult], k: usize| -> Result<f64, String> {
+        let mut v = Vec::with_capacity(m.len());
+        for r in m {
+            let (_, val, why) = r.bands.bands()[k];
+            match val {
+                Some(x) => v.push(x),
+                None => return Err(why.unwrap_or("not computed").to_string()),
+            }
+        }
+        Ok(mean(&v))
+    };
+    let range = mb[0].bands.measured_range_per_mm.unwrap_or([0.0, nyq]);
+    let method_areal = bonnetlab_spectrum::areal::AREAL_METHOD.to_string();
     let mut bands = vec![
-        BandCr {
-            band: "figure".into(),
-            f1_per_mm: 0.0,
-            f2_per_mm: settings.msf_band_per_mm.0,
-            method: method_2d.clone(),
-            rms_before_nm: fig_b,
-            rms_after_nm: fig_a,
-            cr: cr(fig_b, fig_a),
-        },
-        BandCr {
-            band: "msf".into(),
-            f1_per_mm: settings.msf_band_per_mm.0,
-            f2_per_mm: msf_hi,
-            method: method_2d,
-            rms_before_nm: msf_b,
-            rms_after_nm: msf_a,
-            cr: cr(msf_b, msf_a),
-        },
+        BandCr::new(
+            "figure",
+            (0.0, f1),
+            method_areal.clone(),
+            areal(mb, 0),
+            areal(ma, 0),
+        ),
+        BandCr::new(
+            "msf",
+            (f1.max(range[0]).min(msf_hi), msf_hi),
+            method_areal.clone(),
+            areal(mb, 1),
+            areal(ma, 1),
+        ),
     ];
+    let band_fine = BandCr::new(
+        "fine",
+        (f2.min(nyq), nyq),
+        method_areal,
+        areal(mb, 2),
+        areal(ma, 2),
+    );
+    let method_2d = format!(
+        "PSD-integrated: 2-D PSD annulus sums, {} window (a PSD quantity: its window loss \
+         makes it disagree with the map RMS)",
+        settings.window.name()
+    );
+    let bands_psd = vec![
+        BandCr::new(
+            "figure",
+            (0.0, f1),
+            method_2d.clone(),
+            Ok(mean(&each(mb, |m| m.figure_psd_nm))),
+            Ok(mean(&each(ma, |m| m.figure_psd_nm))),
+        ),
+        BandCr::new(
+            "msf",
+            (f1, msf_hi),
+            method_2d,
+            Ok(mean(&each(mb, |m| m.msf_psd_nm))),
+            Ok(mean(&each(ma, |m| m.msf_psd_nm))),
+        ),
+    ];
+    let band_rms = RunBandRms {
+        before: mb.iter().map(|m| m.bands.clone()).collect(),
+        after: ma.iter().map(|m| m.bands.clone()).collect(),
+    };
 
-    let (mut ripple_before, mut ripple_after) = (None, None);
+    let (mut ripple_before, mut ripple_after, mut ripple_reason) = (None, None, None);
     if let Some(pitch) = settings.pitch_mm {
         let ropts = RippleOptions {
             harmonics: settings.harmonics,
             ..RippleOptions::default()
         };
-        let rip =
-            |x: &Option<Psd1d>, y: &Option<Psd1d>, p: &Path| -> Result<Ripple, CompareError> {
-                match (x, y) {
-                    (Some(x), Some(y)) => {
-                        ripple_from_psds(x, y, pitch, &ropts).map_err(|e| CompareError::input(p, e))
-                    }
-                    _ => Err(CompareError::processing(p, "no PSD")),
-                }
-            };
-        let rbf = rip(&psd.x_before, &psd.y_before, paths[0])?;
-        let raf = rip(&psd.x_after, &psd.y_after, paths[nb])?;
-        let h = rbf.band_halfwidth_per_mm;
-        let last = rbf
-            .harmonics
-            .last()
-            .map(|m| m.freq_per_mm)
-            .unwrap_or(rbf.f0_per_mm);
-        bands.push(BandCr {
-            band: "ripple".into(),
-            f1_per_mm: rbf.f0_per_mm - h,
-            f2_per_mm: last + h,
-            method: format!(
-                "sigma_total of the Y PSD over |f - k f0| <= {} mm^-1, k = 1..{}",
-                fmt_sig(h),
-                rbf.harmonics.len()
+        let rip = |x: &Option<Psd1d>, y: &Option<Psd1d>| -> Result<Ripple, SpectrumError> {
+            match (x, y) {
+                (Some(x), Some(y)) => ripple_from_psds(x, y, pitch, &ropts),
+                _ => Err(SpectrumError::TooSmall("no PSD".into())),
+            }
+        };
+        let keep = |r: Result<Ripple, SpectrumError>, p: &Path| match r {
+            Ok(r) => Ok(Ok(r)),
+            Err(e @ SpectrumError::NotResolvable(_)) => Ok(Err(e.to_string())),
+            Err(e) => Err(CompareError::input(p, e)),
+        };
+        let rbf = keep(rip(&psd.x_before, &psd.y_before), paths[0])?;
+        let raf = keep(rip(&psd.x_after, &psd.y_after), paths[nb])?;
+        let f0 = 1.0 / pitch;
+        let (edges, method) = match &rbf {
+            Ok(r) => {
+                let h = r.band_halfwidth_per_mm;
+                let last = r
+                    .harmonics
+                    .last()
+                    .map(|m| m.freq_per_mm)
+                    .unwrap_or(r.f0_per_mm);
+                (
+                    ((r.f0_per_mm - h).max(0.0), last + h),
+                    format!(
+                        "sigma_total of the Y PSD over the union of |f - k f0| <= {} mm^-1, k = 1..{}",
+                        fmt_sig(h),
+                        r.harmonics.len()
+                    ),
+                )
+            }
+            Err(_) => (
+                (f0, f0),
+                "sigma_total of the Y PSD over the harmonic bands".to_string(),
             ),
-            rms_before_nm: rbf.sigma_total_nm,
-            rms_after_nm: raf.sigma_total_nm,
-            cr: cr(rbf.sigma_total_nm, raf.sigma_total_nm),
-        });
-        ripple_before = Some(rbf);
-        ripple_after = Some(raf);
+        };
+        bands.push(BandCr::new(
+            "ripple",
+            edges,
+            method,
+            rbf.as_ref().map(|r| r.sigma_total_nm).map_err(Clone::clone),
+            raf.as_ref().map(|r| r.sigma_total_nm).map_err(Clone::clone),
+        ));
+        ripple_reason = rbf.as_ref().err().or(raf.as_ref().err()).cloned();
+        ripple_before = rbf.ok();
+        ripple_after = raf.ok();
     }
 
     let maps_for_pictures = {
@@ -553,8 +666,12 @@ fn analyse_run(
         pv_after_each_nm: pa,
         spread,
         bands,
+        band_fine,
+        band_rms,
+        bands_psd,
         ripple_before,
         ripple_after,
+        ripple_reason,
         improvement_cr_rms: None,
         improvement_cr_pv: None,
         improvement: None,
@@ -577,16 +694,19 @@ fn analyse_map(
     let (px, py) = psd_xy(&residual, opts).map_err(|e| e.to_string())?;
     let p2 = psd_2d(&residual, opts).map_err(|e| e.to_string())?;
     let (f1, f2) = settings.msf_band_per_mm;
+    // The residual has the terms removed already: the split removes only its mean.
+    let bands = band_split(&residual, &[], (f1, f2)).map_err(|e| e.to_string())?;
     Ok(MapResult {
         rms_nm: st.rms_nm,
         pv_nm: st.pv_nm,
         px,
         py,
-        figure_rms_nm: p2.annulus_rms(0.0, f1),
+        figure_psd_nm: p2.annulus_rms(0.0, f1),
         // Half-open at f1 so the figure and MSF bands do not share an annulus.
-        msf_rms_nm: (p2.annulus_rms(0.0, f2).powi(2) - p2.annulus_rms(0.0, f1).powi(2))
+        msf_psd_nm: (p2.annulus_rms(0.0, f2).powi(2) - p2.annulus_rms(0.0, f1).powi(2))
             .max(0.0)
             .sqrt(),
+        bands,
         residual,
     })
 }
@@ -674,14 +794,8 @@ fn add_improvements(runs: &mut [RunResult]) -> Result<(), CompareError> {
     Ok(())
 }
 
-/// A number with 4 significant digits for prose.
-pub fn fmt_sig(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() {
-        return format!("{v}");
-    }
-    let digits = (3 - v.abs().log10().floor() as i32).clamp(0, 8) as usize;
-    format!("{v:.digits$}")
-}
+/// A number with 4 significant digits for prose (one definition, in the spectrum crate).
+pub use bonnetlab_spectrum::fmt_sig;
 
 #[cfg(test)]
 mod tests {

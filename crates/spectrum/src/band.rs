@@ -7,8 +7,19 @@ use serde::Serialize;
 use crate::error::SpectrumError;
 use crate::psd1d::Psd1d;
 
-/// Default mid-spatial-frequency band edges, mm^-1 (periods 33 mm down to 0.12 mm).
-pub const MSF_DEFAULT_PER_MM: (f64, f64) = (1.0 / 33.0, 1.0 / 0.12);
+/// Default mid-spatial-frequency band edges, mm^-1 (periods 33 mm down to 0.12 mm); the same
+/// edges as the areal split (`areal::BAND_EDGES_DEFAULT_PER_MM`, source stated there).
+pub const MSF_DEFAULT_PER_MM: (f64, f64) = crate::areal::BAND_EDGES_DEFAULT_PER_MM;
+
+/// A number with 4 significant digits, for reasons and captions (no exponent for the
+/// magnitudes of frequencies and lengths met here).
+pub fn fmt_sig(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let digits = (3 - v.abs().log10().floor() as i32).clamp(0, 8) as usize;
+    format!("{v:.digits$}")
+}
 
 pub(crate) fn check_band(f1: f64, f2: f64) -> Result<(), SpectrumError> {
     if !(f1.is_finite() && f2.is_finite() && f1 >= 0.0 && f2 >= f1) {
@@ -17,6 +28,16 @@ pub(crate) fn check_band(f1: f64, f2: f64) -> Result<(), SpectrumError> {
         )));
     }
     Ok(())
+}
+
+/// [`fmt_sig`] without trailing zeros ("3", "0.07", "8.333"), for reasons in prose.
+pub fn fmt_short(v: f64) -> String {
+    let s = fmt_sig(v);
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
 }
 
 /// Band RMS (nm) of a one-sided 1-D PSD over [f1, f2] mm^-1, edges inclusive.
@@ -37,29 +58,79 @@ pub fn band_power(psd: &Psd1d, f1_per_mm: f64, f2_per_mm: f64) -> f64 {
         .sum()
 }
 
-/// A band RMS with the edges that define it (requested and as clipped to the PSD's range).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+/// A PSD-integrated band RMS with the edges that define it (requested and as clipped to the
+/// PSD's range). A band outside the PSD's unbiased range has no value and says why.
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct BandRms {
     pub f1_per_mm: f64,
     pub f2_per_mm: f64,
-    /// The edges actually covered by the PSD's bins (clipped to [first unbiased bin, Nyquist]).
-    pub f1_used_per_mm: f64,
-    pub f2_used_per_mm: f64,
-    pub rms_nm: f64,
+    /// The edges actually covered by the PSD's bins (clipped to [first unbiased bin, Nyquist]);
+    /// `None` when the band lies outside that range.
+    pub f1_used_per_mm: Option<f64>,
+    pub f2_used_per_mm: Option<f64>,
+    /// sqrt(sum of P1 df over the bins in the used edges), nm; `None` when not computed.
+    pub rms_nm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }
 
 /// Band RMS with its edges clipped to the usable range of the PSD (biased bins excluded).
 pub fn band(psd: &Psd1d, f1_per_mm: f64, f2_per_mm: f64) -> Result<BandRms, SpectrumError> {
     check_band(f1_per_mm, f2_per_mm)?;
-    let lo = f1_per_mm.max(psd.first_unbiased_freq_per_mm());
-    let hi = f2_per_mm.min(psd.freq_per_mm.last().copied().unwrap_or(0.0));
-    let rms_nm = if hi >= lo { band_rms(psd, lo, hi) } else { 0.0 };
+    let f_lo = psd.first_unbiased_freq_per_mm();
+    let nyq = psd.freq_per_mm.last().copied().unwrap_or(0.0);
+    let lo = f1_per_mm.max(f_lo);
+    let hi = f2_per_mm.min(nyq);
+    // At least one bin must lie inside the clipped band.
+    let eps = 1e-9 * psd.df_per_mm;
+    let has_bin = hi >= lo
+        && psd
+            .freq_per_mm
+            .iter()
+            .any(|f| *f >= lo - eps && *f <= hi + eps);
+    if has_bin {
+        return Ok(BandRms {
+            f1_per_mm,
+            f2_per_mm,
+            f1_used_per_mm: Some(lo),
+            f2_used_per_mm: Some(hi),
+            rms_nm: Some(band_rms(psd, lo, hi)),
+            reason: None,
+        });
+    }
+    let reason = if f2_per_mm < f_lo {
+        format!(
+            "not resolvable: the band [{}, {}] 1/mm lies below this PSD's first unbiased \
+             frequency {} 1/mm (lines {} mm long)",
+            fmt_short(f1_per_mm),
+            fmt_short(f2_per_mm),
+            fmt_short(f_lo),
+            fmt_short(1.0 / psd.df_per_mm)
+        )
+    } else if f1_per_mm > nyq {
+        format!(
+            "not resolvable: the band [{}, {}] 1/mm lies above the Nyquist frequency {} 1/mm \
+             (sample spacing {} mm)",
+            fmt_short(f1_per_mm),
+            fmt_short(f2_per_mm),
+            fmt_short(nyq),
+            fmt_short(psd.spacing_mm)
+        )
+    } else {
+        format!(
+            "not resolvable: no PSD bin (df {} 1/mm) falls inside [{}, {}] 1/mm",
+            fmt_short(psd.df_per_mm),
+            fmt_short(f1_per_mm),
+            fmt_short(f2_per_mm)
+        )
+    };
     Ok(BandRms {
         f1_per_mm,
         f2_per_mm,
-        f1_used_per_mm: lo,
-        f2_used_per_mm: hi,
-        rms_nm,
+        f1_used_per_mm: None,
+        f2_used_per_mm: None,
+        rms_nm: None,
+        reason: Some(reason),
     })
 }
 
@@ -94,7 +165,13 @@ mod tests {
         let parts = band_power(&p, 0.0, 4.95) + band_power(&p, 5.0, 10.0);
         assert!((whole - parts).abs() < 1e-12);
         let b = band(&p, 0.0, 100.0).unwrap();
-        assert!((b.f1_used_per_mm - 0.2).abs() < 1e-12 && (b.f2_used_per_mm - 10.0).abs() < 1e-12);
+        assert!((b.f1_used_per_mm.unwrap() - 0.2).abs() < 1e-12);
+        assert!((b.f2_used_per_mm.unwrap() - 10.0).abs() < 1e-12);
         assert!(band(&p, 2.0, 1.0).is_err());
+        // Outside the range: no value, a reason (never 0.0).
+        let below = band(&p, 0.0, 0.1).unwrap();
+        assert!(below.rms_nm.is_none() && below.reason.unwrap().contains("below"));
+        let above = band(&p, 20.0, 30.0).unwrap();
+        assert!(above.rms_nm.is_none() && above.reason.unwrap().contains("Nyquist"));
     }
 }

@@ -546,7 +546,8 @@ mod tests {
                         window,
                         detrend: Detrend::Mean,
                         max_gap_px: 2,
-                        min_len: n / 2,
+                        min_len: n / 4,
+                        biased_bins: window.main_lobe_half_width_bins() + 1,
                     };
                     let fast = match axis {
                         Axis::X => sum_rows(&map, rules, None).0,
@@ -560,7 +561,10 @@ mod tests {
                         p.model.as_ref(),
                     );
                     close(&fast.power, &reference.power);
+                    close(&fast.power_all, &reference.power_all);
+                    assert_eq!(fast.bin_weight, reference.bin_weight);
                     assert_eq!(fast.weight, reference.weight);
+                    assert_eq!(fast.max_len, reference.max_len);
                     assert_eq!(fast.n_lines, reference.n_lines);
                     assert_eq!(fast.n_segments, reference.n_segments);
                 }

@@ -14,6 +14,10 @@ pub enum SpectrumError {
     /// No line along the requested axis had a valid segment long enough to analyse.
     #[error("no usable {axis} line: every line has fewer than {min_len} consecutive valid pixels")]
     NoUsableLine { axis: &'static str, min_len: usize },
+    /// The quantity cannot be computed from this map (pitch longer than the field, band
+    /// outside the measured frequencies, ...); the text says why.
+    #[error("not resolvable: {0}")]
+    NotResolvable(String),
     /// The map is too small for the requested analysis.
     #[error("map too small: {0}")]
     TooSmall(String),

@@ -1,6 +1,9 @@
 //! Power spectral densities of surface maps (1-D along X and Y, 2-D, radial), band-limited RMS
 //! and the ripple check at the raster's grating spacing. Conventions: `shared/spec/metrology.md`.
 //!
+//! Band RMS values for reports come from `areal` (brick-wall bands of the map's 2-D DCT, holes
+//! filled, bands that add up to Sq exactly); `band` integrates a PSD and is labelled as a PSD quantity.
+//!
 //! Every PSD says its sidedness: `Psd1d` is ONE-SIDED (nm^2 mm), `Psd2d` is TWO-SIDED
 //! (nm^2 mm^2), the radial forms are labelled (`integrated_nm2_mm`, `average_nm2_mm2`).
 //! Frequencies are in cycles/mm; angular frequencies only appear in `convert`.
@@ -14,6 +17,7 @@
 //! residual in the X pass (the full metrology of a map). FFT plans are shared and buffers
 //! reused per rayon job; results do not depend on the thread count.
 
+pub mod areal;
 pub mod band;
 #[macro_use]
 mod simd;
@@ -29,7 +33,8 @@ pub mod ripple;
 mod scan;
 pub mod window;
 
-pub use band::{band, band_power, band_rms, BandRms, MSF_DEFAULT_PER_MM};
+pub use areal::{band_split, ArealBands, BAND_EDGES_DEFAULT_PER_MM};
+pub use band::{band, band_power, band_rms, fmt_short, fmt_sig, BandRms, MSF_DEFAULT_PER_MM};
 pub use convert::{to_gwyddion_w1, to_surfacetopography_c1d, ConvertedPsd};
 pub use error::SpectrumError;
 pub use form::remove_form;

@@ -9,7 +9,16 @@
 //!    of the segment's length, zero-padded to the line length N and transformed;
 //! 4. its two-sided density is dx |Z_k|^2 / sum(w^2) (the segment's own window energy, so a
 //!    fully valid line gives dx |Z_k|^2 / (N U) exactly as the spec writes);
-//! 5. segments are averaged with weights equal to their sample counts.
+//! 5. every segment is used at its own resolution: a segment of m samples is trusted from its
+//!    own first unbiased bin up, i.e. at full-line bins k >= ceil(b N / m) where b is the
+//!    window's biased-bin count (3 for Hann), exactly as a full line is trusted from bin b up;
+//!    below that its zero-padded periodogram is a smear of the DC / detrend notch and is left
+//!    out. Bins below b (flagged biased) take every segment;
+//! 6. at every bin the contributing segments are averaged with weights equal to their
+//!    *measured* sample counts (interpolated samples carry no weight).
+//!
+//! `LineSums` therefore holds a weight per bin. Bins in [b, ceil(b N / m_max)) where even the
+//! longest segment is not trusted take every segment and are reported as biased.
 //!
 //! Lines are processed in fixed chunks whose partial sums are added in chunk order, so the
 //! result does not depend on the number of threads. FFT plans are shared; input, output and
@@ -66,6 +75,16 @@ pub struct LineRules {
     pub max_gap_px: usize,
     /// Shortest segment analysed.
     pub min_len: usize,
+    /// The window's biased-bin count b: a segment of m samples is used from bin
+    /// ceil(b N / m) up (and at every bin below b).
+    pub biased_bins: usize,
+}
+
+impl LineRules {
+    /// First full-line bin at which a segment of m samples (lines of n) is trusted.
+    pub fn first_bin(&self, m: usize, n: usize) -> usize {
+        (self.biased_bins * n).div_ceil(m.max(1))
+    }
 }
 
 /// Lines per chunk: fixed so that the summation order is independent of the thread count.
@@ -74,10 +93,17 @@ const CHUNK_LINES: usize = 32;
 /// The sum over a set of lines of weight * (two-sided density / dx), for bins 0..=N/2.
 #[derive(Debug, Clone)]
 pub(crate) struct LineSums {
-    /// sum over segments of m * |Z_k|^2 / sum(w^2), bins k = 0..=N/2.
+    /// sum over the segments trusted at bin k of m_valid * |Z_k|^2 / sum(w^2), k = 0..=N/2.
     pub power: Vec<f64>,
-    /// sum of segment lengths m.
+    /// sum over the segments trusted at bin k of m_valid.
+    pub bin_weight: Vec<f64>,
+    /// The same sums over every segment, whatever its resolution (used only for bins where
+    /// no segment is trusted; those are reported as biased).
+    pub power_all: Vec<f64>,
+    /// sum of measured sample counts m_valid over all segments.
     pub weight: f64,
+    /// Longest segment (samples, including interpolated ones).
+    pub max_len: usize,
     pub n_lines: usize,
     pub n_segments: usize,
 }
@@ -86,10 +112,35 @@ impl LineSums {
     pub fn new(nbins: usize) -> Self {
         LineSums {
             power: vec![0.0; nbins],
+            bin_weight: vec![0.0; nbins],
+            power_all: vec![0.0; nbins],
             weight: 0.0,
+            max_len: 0,
             n_lines: 0,
             n_segments: 0,
         }
+    }
+
+    /// Adds one segment: `power` = |Z_k|^2 / sum(w^2), weight `mv` (measured samples), trusted
+    /// from bin `first` up and at every bin below `b`.
+    pub fn add_segment(&mut self, power: &[f64], mv: f64, m: usize, first: usize, b: usize) {
+        for (k, (((a, w), all), p)) in self
+            .power
+            .iter_mut()
+            .zip(self.bin_weight.iter_mut())
+            .zip(self.power_all.iter_mut())
+            .zip(power)
+            .enumerate()
+        {
+            *all += mv * p;
+            if k < b || k >= first {
+                *a += mv * p;
+                *w += mv;
+            }
+        }
+        self.weight += mv;
+        self.max_len = self.max_len.max(m);
+        self.n_segments += 1;
     }
     /// Adds `count` full lines of N = `n` samples whose |Z_k|^2 sum to `power_sum`, all with
     /// the full window of energy `energy` (one scaling per chunk instead of per line).
@@ -98,10 +149,20 @@ impl LineSums {
             return;
         }
         let scale = if energy > 0.0 { n as f64 / energy } else { 0.0 };
-        for (a, p) in self.power.iter_mut().zip(power_sum) {
+        let w = (n * count) as f64;
+        for (((a, all), bw), p) in self
+            .power
+            .iter_mut()
+            .zip(self.power_all.iter_mut())
+            .zip(self.bin_weight.iter_mut())
+            .zip(power_sum)
+        {
             *a += p * scale;
+            *all += p * scale;
+            *bw += w;
         }
-        self.weight += (n * count) as f64;
+        self.weight += w;
+        self.max_len = self.max_len.max(n);
         self.n_lines += count;
         self.n_segments += count;
     }
@@ -109,7 +170,14 @@ impl LineSums {
         for (a, b) in self.power.iter_mut().zip(&o.power) {
             *a += b;
         }
+        for (a, b) in self.bin_weight.iter_mut().zip(&o.bin_weight) {
+            *a += b;
+        }
+        for (a, b) in self.power_all.iter_mut().zip(&o.power_all) {
+            *a += b;
+        }
         self.weight += o.weight;
+        self.max_len = self.max_len.max(o.max_len);
         self.n_lines += o.n_lines;
         self.n_segments += o.n_segments;
     }
@@ -176,12 +244,9 @@ impl LineWorker {
     /// Adds one line's segments to `acc` (`acc.power` has N/2 + 1 bins).
     /// Returns whether any segment was used.
     pub fn add_line(&mut self, z: &[f64], valid: &[bool], acc: &mut LineSums) -> bool {
-        let used = self.for_each_segment(z, valid, |power, m| {
-            for (a, p) in acc.power.iter_mut().zip(power) {
-                *a += m * p;
-            }
-            acc.weight += m;
-            acc.n_segments += 1;
+        let (n, rules) = (self.n, self.rules);
+        let used = self.for_each_segment(z, valid, |power, m, mv| {
+            acc.add_segment(power, mv, m, rules.first_bin(m, n), rules.biased_bins);
         });
         if used {
             acc.n_lines += 1;
@@ -189,12 +254,13 @@ impl LineWorker {
         used
     }
 
-    /// Runs `f(|Z_k|^2 / sum w^2 for k = 0..=N/2, m)` for every segment of the line.
+    /// Runs `f(|Z_k|^2 / sum w^2 for k = 0..=N/2, m, measured samples)` for every segment of
+    /// the line.
     pub fn for_each_segment(
         &mut self,
         z: &[f64],
         valid: &[bool],
-        mut f: impl FnMut(&[f64], f64),
+        mut f: impl FnMut(&[f64], usize, f64),
     ) -> bool {
         let n = self.n;
         debug_assert_eq!(z.len(), n);
@@ -203,7 +269,7 @@ impl LineWorker {
         if valid.iter().all(|&v| v) {
             if n >= self.rules.min_len {
                 self.transform_segment(z, &mut power);
-                f(&power, n as f64);
+                f(&power, n, n as f64);
                 used = true;
             }
         } else {
@@ -225,7 +291,8 @@ impl LineWorker {
                     let filled = std::mem::take(&mut self.z);
                     self.transform_segment(&filled[start..start + m], &mut power);
                     self.z = filled;
-                    f(&power, m as f64);
+                    let measured = valid[start..start + m].iter().filter(|&&v| v).count();
+                    f(&power, m, measured as f64);
                     used = true;
                 }
             }
@@ -548,6 +615,7 @@ mod tests {
             detrend: Detrend::Mean,
             max_gap_px: 2,
             min_len: 8,
+            biased_bins: 3,
         };
         let a = sum_lines(h.view(), v.view(), Axis::Y, rules, None);
         let ht = h.t().to_owned();

@@ -3,9 +3,12 @@
 //! For a line of N samples spaced d mm, window w (U = mean(w^2)), detrended samples z:
 //! S[k] = d |sum_n w[n] z[n] e^{-2 pi i k n / N}|^2 / (N U) (two-sided density), then
 //! P1[k] = 2 S[k] for 0 < k < N/2 and S[k] at k = 0 and k = N/2, f_k = k / (N d).
-//! Lines are averaged with valid-count weights; dropouts are handled per segment (see
-//! `lines`). Global form removal (`PsdOptions::remove`) runs once before any line is cut.
-//! The lowest `biased_bins` bins are biased low by the detrending and should not be read.
+//! Lines are averaged with measured-count weights; dropouts are handled per segment, and every
+//! segment of at least `min_segment_px` samples is used from its own first unbiased bin up
+//! (rule and reasons in `lines`). Global form removal (`PsdOptions::remove`) runs once before
+//! any line is cut. The lowest `biased_bins` bins are biased by the detrending (and, on
+//! apertures without a full-length line, by the smear of the longest segment's window) and
+//! should not be read.
 
 use bonnetlab_surface::{HeightStats, Surface, Term};
 use serde::Serialize;
@@ -27,11 +30,13 @@ pub struct PsdOptions {
     pub detrend: Detrend,
     /// Longest interior dropout (pixels) filled by linear interpolation (default 5).
     pub max_gap_px: usize,
-    /// Shortest segment analysed, in pixels (default 16).
+    /// Shortest segment analysed, in pixels (default 8: a Hann segment of 8 samples is
+    /// trusted only at bins >= 3N/8, near Nyquist; anything shorter resolves nothing).
     pub min_segment_px: usize,
-    /// Shortest segment analysed, as a fraction of the line length (default 0.5): a segment
-    /// shorter than half the line has a resolution (ENBW / L_segment) more than twice as
-    /// coarse as a full line's, and averaging it in would smear peaks of the mean spectrum.
+    /// Shortest segment analysed, as a fraction of the line length (default 0: every segment
+    /// is used, each at the frequencies its own length resolves; see `lines`). Before issue
+    /// #19 this was 0.5, which on round apertures dropped every line outside the central
+    /// 87 % of the diameter.
     pub min_segment_fraction: f64,
 }
 
@@ -42,8 +47,8 @@ impl Default for PsdOptions {
             remove: vec![Term::Piston, Term::Tilt],
             detrend: Detrend::Mean,
             max_gap_px: 5,
-            min_segment_px: 16,
-            min_segment_fraction: 0.5,
+            min_segment_px: 8,
+            min_segment_fraction: 0.0,
         }
     }
 }
@@ -67,6 +72,7 @@ impl PsdOptions {
             detrend: self.detrend,
             max_gap_px: self.max_gap_px,
             min_len: self.min_segment_len(n),
+            biased_bins: self.window.main_lobe_half_width_bins() + 1,
         })
     }
 }
@@ -132,11 +138,10 @@ fn finish(
 ) -> Psd1d {
     let df = 1.0 / (n as f64 * d);
     let nbins = n / 2 + 1;
-    let scale = if sums.weight > 0.0 {
-        d / sums.weight
-    } else {
-        0.0
-    };
+    let b = opts.window.main_lobe_half_width_bins() + 1;
+    // Bins where no segment is trusted (below the longest segment's first unbiased bin) take
+    // every segment and are reported as biased.
+    let first_trusted = (b * n).div_ceil(sums.max_len.max(1)).max(b);
     let psd = (0..nbins)
         .map(|k| {
             let fold = if k == 0 || (n.is_multiple_of(2) && k == n / 2) {
@@ -144,7 +149,16 @@ fn finish(
             } else {
                 2.0
             };
-            fold * scale * sums.power[k]
+            let (p, w) = if sums.bin_weight[k] > 0.0 {
+                (sums.power[k], sums.bin_weight[k])
+            } else {
+                (sums.power_all[k], sums.weight)
+            };
+            if w > 0.0 {
+                fold * d * p / w
+            } else {
+                0.0
+            }
         })
         .collect();
     Psd1d {
@@ -157,7 +171,7 @@ fn finish(
         enbw_bins: opts.window.enbw_bins(n),
         n_lines: sums.n_lines,
         n_segments: sums.n_segments,
-        biased_bins: (opts.window.main_lobe_half_width_bins() + 1).min(nbins),
+        biased_bins: first_trusted.min(nbins),
         removed,
     }
 }
@@ -343,9 +357,10 @@ mod tests {
     }
 
     #[test]
-    fn dropout_rows_weight_segments_by_length() {
-        // A row split in two by a long gap equals the length-weighted mean of the two pieces
-        // analysed as separate maps.
+    fn dropout_rows_use_every_segment_at_its_own_resolution() {
+        // A row split in two by a long gap: at each bin, the measured-count weighted mean of the
+        // pieces trusted there (a piece of m samples from bin ceil(3 N / m) up, and every piece
+        // below bin 3), the pieces analysed by hand.
         let mut r = Rng::new(11);
         let n = 64;
         let z: Vec<f64> = (0..n).map(|_| r.normal()).collect();
@@ -353,22 +368,26 @@ mod tests {
         for v in valid.iter_mut().take(30).skip(20) {
             *v = false;
         }
+        // One interpolated sample inside the second piece: it counts in the segment but not in
+        // its weight.
+        valid[40] = false;
         let h = Array2::from_shape_vec((1, n), z.clone()).unwrap();
         let m = Array2::from_shape_vec((1, n), valid).unwrap();
         let s = Surface::with_mask(h, m, Some(0.1), Some(0.1)).unwrap();
         let opts = PsdOptions {
             remove: vec![],
-            min_segment_fraction: 0.0,
-            min_segment_px: 8,
             ..PsdOptions::default()
         };
         let p = psd_x(&s, &opts).unwrap();
         assert_eq!(p.n_segments, 2);
-        // Reference: segments zero-padded by hand.
-        let mut expect = vec![0.0; n / 2 + 1];
-        for (a, b) in [(0usize, 20usize), (30, 64)] {
+        let mut zf = z.clone();
+        zf[40] = 0.5 * (z[39] + z[41]);
+        let mut num = vec![0.0; n / 2 + 1];
+        let mut den = vec![0.0; n / 2 + 1];
+        for (a, b, measured) in [(0usize, 20usize, 20.0), (30, 64, 33.0)] {
             let m = b - a;
-            let seg = &z[a..b];
+            let first = (3 * n).div_ceil(m);
+            let seg = &zf[a..b];
             let mean = seg.iter().sum::<f64>() / m as f64;
             let w = Window::Hann.coefficients(m);
             let e: f64 = w.iter().map(|v| v * v).sum();
@@ -379,13 +398,42 @@ mod tests {
             let ones = vec![1.0; n];
             // dft_density normalises by N U = sum(ones^2) = n; rescale to the segment energy.
             let s2 = dft_density(&padded, &ones, 0.1);
-            for k in 0..expect.len() {
-                let fold = if k == 0 || k == n / 2 { 1.0 } else { 2.0 };
-                expect[k] += fold * s2[k] * n as f64 / e * m as f64 / 54.0;
+            for k in 0..num.len() {
+                if k < 3 || k >= first {
+                    let fold = if k == 0 || k == n / 2 { 1.0 } else { 2.0 };
+                    num[k] += fold * s2[k] * n as f64 / e * measured;
+                    den[k] += measured;
+                }
             }
         }
-        for (a, b) in p.psd_nm2_mm.iter().zip(&expect) {
-            assert!((a - b).abs() <= 1e-10 * b.abs().max(1e-9), "{a} vs {b}");
+        // The longer piece (34) is trusted from bin 6: bins 3..5 take both pieces (biased).
+        assert_eq!(p.biased_bins, 6);
+        for k in 0..num.len() {
+            let expect = if den[k] > 0.0 {
+                num[k] / den[k]
+            } else {
+                // both pieces, every bin
+                let mut t = 0.0;
+                for (a, b, measured) in [(0usize, 20usize, 20.0), (30, 64, 33.0)] {
+                    let m = b - a;
+                    let seg = &zf[a..b];
+                    let mean = seg.iter().sum::<f64>() / m as f64;
+                    let w = Window::Hann.coefficients(m);
+                    let e: f64 = w.iter().map(|v| v * v).sum();
+                    let mut padded = vec![0.0; n];
+                    for j in 0..m {
+                        padded[j] = (seg[j] - mean) * w[j];
+                    }
+                    let s2 = dft_density(&padded, &vec![1.0; n], 0.1);
+                    t += 2.0 * s2[k] * n as f64 / e * measured / 53.0;
+                }
+                t
+            };
+            let got = p.psd_nm2_mm[k];
+            assert!(
+                (got - expect).abs() <= 1e-10 * expect.abs().max(1e-9),
+                "bin {k}: {got} vs {expect}"
+            );
         }
     }
 

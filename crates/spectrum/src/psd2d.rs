@@ -50,8 +50,9 @@ pub struct RadialPsd {
     pub dfr_per_mm: f64,
     /// Azimuthally INTEGRATED PSD, nm^2 mm: sum(integrated) * dfr = mean square.
     pub integrated_nm2_mm: Vec<f64>,
-    /// Azimuthal AVERAGE of the two-sided 2-D PSD, nm^2 mm^2 (0 where a bin holds no pixel).
-    pub average_nm2_mm2: Vec<f64>,
+    /// Azimuthal AVERAGE of the two-sided 2-D PSD, nm^2 mm^2 (`None` where a bin holds no
+    /// frequency pixel: no value, rather than a 0 that reads as "no power").
+    pub average_nm2_mm2: Vec<Option<f64>>,
     /// Full-plane frequency pixels in each bin.
     pub counts: Vec<usize>,
 }
@@ -189,7 +190,7 @@ impl Psd2d {
             average_nm2_mm2: sum
                 .iter()
                 .zip(&cnt)
-                .map(|(s, c)| if *c > 0.0 { s / c } else { 0.0 })
+                .map(|(s, c)| (*c > 0.0).then(|| s / c))
                 .collect(),
             counts: cnt.iter().map(|c| *c as usize).collect(),
         }

@@ -2,14 +2,19 @@
 //! direction, across the raster tracks).
 //!
 //! - sigma_k = band RMS over |f - k f0| <= h with h = max(4 df, 0.1 f0), k = 1..=K (harmonics
-//!   whose band centre lies below Nyquist); sigma_total = sqrt(sum sigma_k^2).
+//!   whose band centre lies below Nyquist); sigma_total = RMS over the union of those bands
+//!   (each bin counted once: when few periods fit on the map the bands overlap, and
+//!   sqrt(sum sigma_k^2) would count the same bins several times).
+//! - Not resolvable (an error `NotResolvable` with the reason, never numbers): the pitch is
+//!   longer than the Y field, f0 is above Nyquist, or the f0 band reaches the biased lowest
+//!   bins (fewer than about b + 4 periods on the field, b = the window's biased bins).
 //! - A_eq = sqrt(2) sigma_1, PV_eq = 2 sqrt(2) sigma_1 (never read amplitudes off peak heights:
 //!   the peak scales with 1 / ENBW).
 //! - Prominence (dB) = 10 log10(peak / background), peak = largest PSD value in the f0 band,
 //!   background = median of the PSD in the flanking windows h < |f - f0| <= h + max(2h, 8 df),
 //!   leaving out biased bins and every harmonic band. The median ignores a flank's own peaks.
-//! - `detected` = prominence >= threshold (default 6 dB) and the f0 band clear of the biased
-//!   lowest bins (a map only a few pitches long cannot show a ripple reliably). On a ripple-free map averaged over
+//! - `detected` = prominence >= threshold (default 6 dB); `verdict` says so in words. On a
+//!   ripple-free map averaged over
 //!   many lines (>= 64) the prominence of noise is about 1 dB; with very few lines the PSD
 //!   estimate itself fluctuates by several dB, so raise the threshold for those.
 //! - y_over_x = sigma_1 from the Y PSD / band RMS of the X PSD over the same band (anisotropy).
@@ -70,8 +75,11 @@ pub struct Ripple {
     /// sigma_1 (Y) / band RMS of the X PSD over the same band; null when X has no power there.
     pub y_over_x: Option<f64>,
     pub sigma1_x_nm: f64,
-    /// The f0 band reaches into the biased lowest bins (too few periods on the map).
+    /// The f0 band reaches into the biased lowest bins. Always false in a returned value:
+    /// such a ripple is `NotResolvable` (kept for the JSON contract's readers).
     pub biased: bool,
+    /// Why `detected` is what it is, in words (prominence against the threshold).
+    pub verdict: String,
     pub harmonics: Vec<Harmonic>,
 }
 
@@ -90,12 +98,38 @@ pub fn ripple_from_psds(
     let f0 = 1.0 / pitch_mm;
     let df = y.df_per_mm;
     let nyq = y.freq_per_mm.last().copied().unwrap_or(0.0);
+    let field = 1.0 / df;
+    let sig = crate::band::fmt_short;
+    if pitch_mm > field {
+        return Err(SpectrumError::NotResolvable(format!(
+            "the {} mm pitch is longer than the {} mm field (Y lines)",
+            sig(pitch_mm),
+            sig(field)
+        )));
+    }
     if f0 > nyq {
-        return Err(SpectrumError::InvalidArgument(format!(
-            "grating frequency 1/{pitch_mm} mm = {f0} mm^-1 is above the Y Nyquist frequency {nyq} mm^-1"
+        return Err(SpectrumError::NotResolvable(format!(
+            "the {} mm pitch is shorter than two Y pixels: 1/pitch = {} 1/mm is above the \
+             Nyquist frequency {} 1/mm",
+            sig(pitch_mm),
+            sig(f0),
+            sig(nyq)
         )));
     }
     let h = (4.0 * df).max(0.1 * f0);
+    let f_lo = y.first_unbiased_freq_per_mm();
+    if f0 - h < f_lo - 1e-9 * df {
+        return Err(SpectrumError::NotResolvable(format!(
+            "the {} mm pitch fits only {:.1} times in the {} mm Y field: its band {} +/- {} 1/mm \
+             reaches the lowest {} PSD bins, which the detrend and window bias",
+            sig(pitch_mm),
+            field / pitch_mm,
+            sig(field),
+            sig(f0),
+            sig(h),
+            y.biased_bins
+        )));
+    }
     let harmonics: Vec<Harmonic> = (1..=ropts.harmonics.max(1))
         .map(|k| k as f64 * f0)
         .take_while(|&fk| fk <= nyq)
@@ -107,14 +141,18 @@ pub fn ripple_from_psds(
         })
         .collect();
     let sigma1 = harmonics[0].sigma_nm;
-    let sigma_total = harmonics
+    let eps = 1e-9 * df;
+    let in_band = |f: f64, c: f64| (f - c).abs() <= h + eps;
+    // Union of the harmonic bands, each bin once.
+    let sigma_total = y
+        .freq_per_mm
         .iter()
-        .map(|m| m.sigma_nm * m.sigma_nm)
+        .zip(&y.psd_nm2_mm)
+        .filter(|(f, _)| harmonics.iter().any(|m| in_band(**f, m.freq_per_mm)))
+        .map(|(_, p)| p * df)
         .sum::<f64>()
         .sqrt();
 
-    let eps = 1e-9 * df;
-    let in_band = |f: f64, c: f64| (f - c).abs() <= h + eps;
     let peak = y
         .freq_per_mm
         .iter()
@@ -123,7 +161,6 @@ pub fn ripple_from_psds(
         .map(|(_, p)| *p)
         .fold(0.0, f64::max);
     let flank = (2.0 * h).max(8.0 * df);
-    let f_lo = y.first_unbiased_freq_per_mm();
     let mut bg: Vec<f64> = y
         .freq_per_mm
         .iter()
@@ -157,7 +194,14 @@ pub fn ripple_from_psds(
         0.0
     };
     let sigma1_x = band_rms(x, f0 - h, f0 + h);
-    let biased = f0 - h < f_lo;
+    let detected = prominence_db >= ropts.prominence_threshold_db;
+    let verdict = format!(
+        "{}: prominence {:.1} dB {} the {} dB threshold",
+        if detected { "detected" } else { "not detected" },
+        prominence_db,
+        if detected { ">=" } else { "<" },
+        ropts.prominence_threshold_db
+    );
     Ok(Ripple {
         pitch_mm,
         f0_per_mm: f0,
@@ -170,10 +214,11 @@ pub fn ripple_from_psds(
         peak_nm2_mm: peak,
         background_nm2_mm: background,
         prominence_threshold_db: ropts.prominence_threshold_db,
-        detected: prominence_db >= ropts.prominence_threshold_db && !biased,
+        detected,
         y_over_x: (sigma1_x > 0.0).then(|| sigma1 / sigma1_x),
         sigma1_x_nm: sigma1_x,
-        biased,
+        biased: false,
+        verdict,
         harmonics,
     })
 }

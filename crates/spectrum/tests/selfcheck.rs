@@ -245,7 +245,10 @@ fn radial_integral_equals_mean_square_and_forms_are_consistent() {
     assert_eq!(npix, 300 * 500);
     // integrated = average * count * dfx dfy / dfr, bin by bin.
     for b in 0..rad.counts.len() {
-        let via_avg = rad.average_nm2_mm2[b] * rad.counts[b] as f64 * p2.dfx_per_mm * p2.dfy_per_mm
+        let via_avg = rad.average_nm2_mm2[b].unwrap_or(0.0)
+            * rad.counts[b] as f64
+            * p2.dfx_per_mm
+            * p2.dfy_per_mm
             / rad.dfr_per_mm;
         assert!(
             (via_avg - rad.integrated_nm2_mm[b]).abs()

@@ -1,0 +1,565 @@
+//! Band-limited RMS from the map itself: the band values every report shows (`stats --bands`,
+//! `compare`, and the lead's simulate / calibrate through [`band_split`]).
+//!
+//! Bands (edges F1 <= F2 in cycles/mm, default [`BAND_EDGES_DEFAULT_PER_MM`]): *figure* below
+//! F1, *MSF* from F1 to F2, *fine* above F2, by radial frequency |f| = sqrt(fx^2 + fy^2).
+//!
+//! Method: exact spectral (brick-wall) filtering in the cosine basis, after the joint removal of
+//! the requested form terms and of the valid-pixel mean (z is that residual, n its valid
+//! pixels):
+//! 1. edge handling, part 1 (holes, round apertures): invalid pixels are filled by a smooth
+//!    continuation of the data, normalised Gaussian convolution G*(M z) / G*M at the smallest
+//!    of the scales 4, 16, 64, ... pixels whose kernel reaches at least one pixel's worth of
+//!    valid weight (small dropouts take the local mean, the corners outside a round aperture
+//!    a broad average). The fill only carries the data across holes; it is never counted;
+//! 2. edge handling, part 2 (the map border): the 2-D DCT-II, i.e. the DFT of the map mirrored
+//!    about each border, so the periodic continuation has no jump at the border and no window
+//!    is needed. DCT index (k, l) has frequency (k / (2 Nx dx), l / (2 Ny dy));
+//! 3. components: c_b = inverse DCT of the coefficients with |f| in band b (figure |f| < F1,
+//!    MSF F1 <= |f| < F2, fine |f| >= F2). On a full rectangle they are orthogonal (the DCT is)
+//!    and their mean squares add up to Sq^2 exactly;
+//! 4. band power = covariance of the component with the map over the valid pixels,
+//!    P_b = <c_b, z>_valid / n, band RMS = sqrt(P_b). The components add up to z on every
+//!    valid pixel, so the three powers add up to <z, z> / n = Sq^2 exactly on any aperture; on
+//!    a full rectangle P_b is the component's own mean square. With holes the two differ by
+//!    the cross terms <c_a, c_b>_valid, reported as `cross_term_fraction` (sum over bands of
+//!    |P_b - own_b| / Sq^2) so a reader can see how far from orthogonal the split was.
+//!
+//! A band the map cannot resolve is `None` with a reason: no pixel size, the band lies
+//! below the lowest measured frequency 1 / (the valid field's longest side), or above the
+//! Nyquist frequency of the coarser axis. An edge outside the measured range makes no cut:
+//! the content on its side belongs to the neighbouring band (e.g. with F2 above Nyquist, MSF
+//! runs from F1 to Nyquist and fine is absent).
+//!
+//! The PSD-integrated band RMS (bin sums of a windowed PSD, `band`) is a different, labelled
+//! quantity: its window loss on non-stationary maps makes it disagree with Sq.
+
+use std::sync::Arc;
+
+use bonnetlab_surface::{remove_terms, Surface, Term};
+use ndarray::Array2;
+use rayon::prelude::*;
+use realfft::num_complex::Complex;
+use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
+use serde::Serialize;
+
+use crate::error::SpectrumError;
+
+/// Default band edges, mm^-1: figure above 33 mm periods, MSF 33 mm to 0.12 mm, fine below
+/// 0.12 mm. Source: shared/spec/metrology.md ("1/33 mm to 1/0.12 mm"), the large-optics
+/// (NIF / LLNL) convention for mid-spatial frequencies.
+pub const BAND_EDGES_DEFAULT_PER_MM: (f64, f64) = (1.0 / 33.0, 1.0 / 0.12);
+
+/// ISO 16610-61 Gaussian constant alpha = sqrt(ln 2 / pi) (the fill's kernels).
+fn gaussian_alpha() -> f64 {
+    (std::f64::consts::LN_2 / std::f64::consts::PI).sqrt()
+}
+
+/// The three band RMS values of one map (field names as `stats --bands` writes them).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ArealBands {
+    /// Requested edges [F1, F2], mm^-1.
+    pub edges_per_mm: [f64; 2],
+    /// RMS below F1, nm; `None` when not resolvable (see `figure_reason`).
+    pub figure_rms_nm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub figure_reason: Option<String>,
+    /// RMS from F1 to F2, nm.
+    pub msf_rms_nm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub msf_reason: Option<String>,
+    /// RMS above F2, nm.
+    pub fine_rms_nm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fine_reason: Option<String>,
+    /// Sq of the same residual, nm: the quadrature sum of the resolvable bands.
+    pub total_rms_nm: f64,
+    /// [lowest, highest] frequency the map measures, mm^-1 (1 / longest side of the valid
+    /// field, Nyquist of the coarser axis); `None` without a pixel size.
+    pub measured_range_per_mm: Option<[f64; 2]>,
+    /// sum over band pairs of |2 <c_a, c_b>| / <z, z>: 0 for an orthogonal split.
+    pub cross_term_fraction: f64,
+    pub removed: Vec<Term>,
+    pub method: String,
+}
+
+impl ArealBands {
+    /// (name, value, reason) of the three bands, figure first.
+    pub fn bands(&self) -> [(&'static str, Option<f64>, Option<&str>); 3] {
+        [
+            ("figure", self.figure_rms_nm, self.figure_reason.as_deref()),
+            ("msf", self.msf_rms_nm, self.msf_reason.as_deref()),
+            ("fine", self.fine_rms_nm, self.fine_reason.as_deref()),
+        ]
+    }
+}
+
+/// The method string written beside the values.
+pub const AREAL_METHOD: &str = "areal split of the map: brick-wall bands of the 2-D DCT \
+     (mirrored borders, no window) by radial frequency, holes filled by normalised Gaussian \
+     continuation; band power = covariance of the band component with the map over the valid \
+     pixels, so the bands add up to Sq^2 exactly";
+
+/// Band RMS of `s` after removing `remove` jointly (and the mean), split at `edges_per_mm`.
+pub fn band_split(
+    s: &Surface,
+    remove: &[Term],
+    edges_per_mm: (f64, f64),
+) -> Result<ArealBands, SpectrumError> {
+    let (f1, f2) = edges_per_mm;
+    crate::band::check_band(f1, f2)?;
+    let (r, _) = remove_terms(s, remove)?;
+    let n = r.valid_count();
+    if n == 0 {
+        return Err(bonnetlab_surface::SurfaceError::NoValidPixel.into());
+    }
+    let valid = r.valid().clone();
+    let mean = r.valid_heights().sum::<f64>() / n as f64;
+    let z = Array2::from_shape_fn(r.dim(), |ij| {
+        if valid[ij] {
+            r.heights_nm()[ij] - mean
+        } else {
+            0.0
+        }
+    });
+    let zz: f64 = z.iter().map(|v| v * v).sum();
+    let total = (zz / n as f64).sqrt();
+    let mut out = ArealBands {
+        edges_per_mm: [f1, f2],
+        figure_rms_nm: None,
+        figure_reason: None,
+        msf_rms_nm: None,
+        msf_reason: None,
+        fine_rms_nm: None,
+        fine_reason: None,
+        total_rms_nm: total,
+        measured_range_per_mm: None,
+        cross_term_fraction: 0.0,
+        removed: r.removed.clone(),
+        method: AREAL_METHOD.into(),
+    };
+    let (Some(dx), Some(dy)) = (s.dx_mm, s.dy_mm) else {
+        let why = "not resolvable: the pixel size is unknown, so no spatial frequency can be \
+                   assigned"
+            .to_string();
+        out.figure_reason = Some(why.clone());
+        out.msf_reason = Some(why.clone());
+        out.fine_reason = Some(why);
+        return Ok(out);
+    };
+    let (lx, ly) = valid_extent_mm(&valid, dx, dy);
+    let field = lx.max(ly);
+    let f_lo = 1.0 / field;
+    let f_hi = 0.5 / dx.max(dy);
+    out.measured_range_per_mm = Some([f_lo, f_hi]);
+    let fmt = |v: f64| crate::band::fmt_short(v);
+    let below = |what: &str, edge: f64| {
+        format!(
+            "not resolvable: {what} (periods longer than {} mm) lies below the lowest measured \
+             frequency {} 1/mm (the valid field is {} mm long)",
+            fmt(1.0 / edge),
+            fmt(f_lo),
+            fmt(field)
+        )
+    };
+    let above = |what: &str, edge: f64| {
+        format!(
+            "not resolvable: {what} (periods shorter than {} mm) lies above the Nyquist \
+             frequency {} 1/mm (pixel {} mm)",
+            fmt(1.0 / edge),
+            fmt(f_hi),
+            fmt(dx.max(dy))
+        )
+    };
+    // Low-pass at an edge: None = nothing passes (edge below the range), Some(None) = all
+    // passes (edge above the range), Some(Some(map)) = filtered.
+    let cut = |f: f64| f > f_lo && f < f_hi;
+    // DCT coefficients of the filled map, once for both edges.
+    let coeffs = if cut(f1) || cut(f2) {
+        let filled = if n == valid.len() {
+            z.clone()
+        } else {
+            fill_holes(&z, &valid, dx, dy)
+        };
+        Some(dct2(&filled, false))
+    } else {
+        None
+    };
+    let lowpass = |f: f64| -> Option<Option<Array2<f64>>> {
+        if f <= f_lo {
+            None
+        } else if f >= f_hi {
+            Some(None)
+        } else {
+            coeffs.as_ref().map(|c| Some(radial_lowpass(c, dx, dy, f)))
+        }
+    };
+    let l1 = lowpass(f1);
+    let l2 = if f2 == f1 { l1.clone() } else { lowpass(f2) };
+    // Components as closures over pixels (value at a valid pixel index).
+    let value = |l: &Option<Option<Array2<f64>>>, ij: (usize, usize)| -> f64 {
+        match l {
+            None => 0.0,
+            Some(None) => z[ij],
+            Some(Some(m)) => m[ij],
+        }
+    };
+    let mut p = [0.0f64; 3];
+    let mut own = [0.0f64; 3];
+    for (ij, &ok) in valid.indexed_iter() {
+        if !ok {
+            continue;
+        }
+        let zv = z[ij];
+        let a = value(&l1, ij);
+        let b = value(&l2, ij);
+        let c = [a, b - a, zv - b];
+        for k in 0..3 {
+            p[k] += c[k] * zv;
+            own[k] += c[k] * c[k];
+        }
+    }
+    out.cross_term_fraction = if zz > 0.0 {
+        // <z, z> = sum_b own_b + 2 sum_{a<b} <c_a, c_b>; P_b - own_b = sum_{a != b} <c_a, c_b>.
+        (0..3).map(|k| (p[k] - own[k]).abs()).sum::<f64>() / zz
+    } else {
+        0.0
+    };
+    let rms = |pk: f64| (pk.max(0.0) / n as f64).sqrt();
+    // figure [0, F1]
+    if f1 <= f_lo {
+        out.figure_reason = Some(below("the figure band", f1));
+    } else {
+        out.figure_rms_nm = Some(rms(p[0]));
+    }
+    // MSF [F1, F2]
+    if f2 <= f_lo {
+        out.msf_reason = Some(below("the MSF band", f2));
+    } else if f1 >= f_hi {
+        out.msf_reason = Some(above("the MSF band", f1));
+    } else {
+        out.msf_rms_nm = Some(rms(p[1]));
+    }
+    // fine [F2, inf)
+    if f2 >= f_hi {
+        out.fine_reason = Some(above("the fine band", f2));
+    } else {
+        out.fine_rms_nm = Some(rms(p[2]));
+    }
+    Ok(out)
+}
+
+/// Lengths (mm) of the bounding box of the valid pixels along X and Y (pixel counts times
+/// the pixel size: a field of N pixels measures periods up to N d).
+fn valid_extent_mm(valid: &Array2<bool>, dx: f64, dy: f64) -> (f64, f64) {
+    let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
+    for ((i, j), &ok) in valid.indexed_iter() {
+        if ok {
+            r0 = r0.min(i);
+            r1 = r1.max(i);
+            c0 = c0.min(j);
+            c1 = c1.max(j);
+        }
+    }
+    if r0 == usize::MAX {
+        return (0.0, 0.0);
+    }
+    ((c1 - c0 + 1) as f64 * dx, (r1 - r0 + 1) as f64 * dy)
+}
+
+/// `z` with its invalid pixels replaced by a smooth continuation: normalised Gaussian
+/// convolution at the smallest of the scales 4, 16, 64, ... pixels whose valid weight G*M at
+/// that pixel is at least 1 (one pixel's worth; the kernel peak is 1).
+pub fn fill_holes(z: &Array2<f64>, valid: &Array2<bool>, dx: f64, dy: f64) -> Array2<f64> {
+    let m = valid.mapv(|v| if v { 1.0 } else { 0.0 });
+    let mz = Array2::from_shape_fn(z.dim(), |ij| if valid[ij] { z[ij] } else { 0.0 });
+    let mut out = mz.clone();
+    let mut todo: Vec<(usize, usize)> = valid
+        .indexed_iter()
+        .filter(|(_, &v)| !v)
+        .map(|(ij, _)| ij)
+        .collect();
+    let longest = z.nrows().max(z.ncols()) as f64;
+    let mut px = 4.0;
+    while !todo.is_empty() {
+        let last = px >= 2.0 * longest;
+        let lam = px * dx.min(dy);
+        let num = gaussian_2d(&mz, dx, dy, lam);
+        let den = gaussian_2d(&m, dx, dy, lam);
+        todo.retain(|&ij| {
+            if den[ij] >= 1.0 || (last && den[ij] > 0.0) {
+                out[ij] = num[ij] / den[ij];
+                false
+            } else {
+                // At the last scale a pixel no kernel reaches keeps 0 (the mean).
+                !last
+            }
+        });
+        px *= 4.0;
+    }
+    out
+}
+
+/// 2-D orthonormal DCT-II of `a` (`inverse`: its inverse, the DCT-III), along rows then
+/// columns.
+fn dct2(a: &Array2<f64>, inverse: bool) -> Array2<f64> {
+    let r = dct_rows(a, inverse);
+    let t = r.t().as_standard_layout().into_owned();
+    let c = dct_rows(&t, inverse);
+    c.t().as_standard_layout().into_owned()
+}
+
+/// The low-pass of the map whose DCT is `c`: coefficients with radial frequency
+/// sqrt((k / (2 Nx dx))^2 + (l / (2 Ny dy))^2) < f kept, the rest zeroed, transformed back.
+fn radial_lowpass(c: &Array2<f64>, dx: f64, dy: f64, f: f64) -> Array2<f64> {
+    let (ny, nx) = c.dim();
+    let (ux, uy) = (1.0 / (2.0 * nx as f64 * dx), 1.0 / (2.0 * ny as f64 * dy));
+    let kept = Array2::from_shape_fn((ny, nx), |(l, k)| {
+        let (fx, fy) = (k as f64 * ux, l as f64 * uy);
+        if fx * fx + fy * fy < f * f {
+            c[(l, k)]
+        } else {
+            0.0
+        }
+    });
+    dct2(&kept, true)
+}
+
+/// Orthonormal DCT-II (or its inverse) of every row, through a real FFT of length 2N of the
+/// row mirrored about its end: Y_k = 2 e^{i pi k / 2N} X_k for the unnormalised DCT-II X.
+fn dct_rows(a: &Array2<f64>, inverse: bool) -> Array2<f64> {
+    let (rows, n) = a.dim();
+    let p = 2 * n;
+    let mut planner = RealFftPlanner::<f64>::new();
+    let fwd: Arc<dyn RealToComplex<f64>> = planner.plan_fft_forward(p);
+    let inv: Arc<dyn ComplexToReal<f64>> = planner.plan_fft_inverse(p);
+    let tw: Vec<Complex<f64>> = (0..n)
+        .map(|k| Complex::from_polar(1.0, std::f64::consts::PI * k as f64 / p as f64))
+        .collect();
+    // Orthonormal scaling: s_0 = sqrt(1 / N), s_k = sqrt(2 / N).
+    let s0 = (1.0 / n as f64).sqrt();
+    let sk = (2.0 / n as f64).sqrt();
+    let src = a.as_standard_layout();
+    let src = src.as_slice().unwrap_or(&[]);
+    let mut out = vec![0.0; rows * n];
+    out.par_chunks_mut(n).enumerate().for_each_init(
+        || {
+            (
+                fwd.make_input_vec(),
+                fwd.make_output_vec(),
+                fwd.make_scratch_vec(),
+                inv.make_scratch_vec(),
+            )
+        },
+        |(buf, spec, fs, is): &mut (Vec<f64>, Vec<Complex<f64>>, _, _), (i, dst)| {
+            let x = &src[i * n..(i + 1) * n];
+            if !inverse {
+                buf[..n].copy_from_slice(x);
+                for (d, v) in buf[n..].iter_mut().zip(x.iter().rev()) {
+                    *d = *v;
+                }
+                // Lengths come from the plans, so these cannot fail.
+                let _ = fwd.process_with_scratch(buf, spec, fs);
+                for (k, d) in dst.iter_mut().enumerate() {
+                    // X_k = Re(e^{-i pi k / 2N} Y_k) / 2
+                    let xk = 0.5 * (spec[k] * tw[k].conj()).re;
+                    *d = xk * if k == 0 { s0 } else { sk };
+                }
+            } else {
+                // Unnormalised X_k from the orthonormal coefficients, then Y_k = 2 e^{..} X_k,
+                // Y_N = 0, and the inverse real FFT of the mirrored sequence.
+                for (k, c) in spec.iter_mut().enumerate().take(n) {
+                    let xk = x[k] / if k == 0 { s0 } else { sk };
+                    *c = tw[k] * (2.0 * xk);
+                }
+                spec[n] = Complex::new(0.0, 0.0);
+                spec[0].im = 0.0;
+                let _ = inv.process_with_scratch(spec, buf, is);
+                // realfft's inverse is unnormalised: divide by 2N; the mirrored sequence's
+                // energy is twice the row's, which the orthonormal scaling already accounts for.
+                let scale = 1.0 / p as f64;
+                for (d, v) in dst.iter_mut().zip(buf.iter()) {
+                    *d = v * scale;
+                }
+            }
+        },
+    );
+    Array2::from_shape_vec((rows, n), out).unwrap_or_else(|_| Array2::zeros((rows, n)))
+}
+
+/// Separable (un-normalised, peak 1) Gaussian convolution with zero outside the map.
+fn gaussian_2d(a: &Array2<f64>, dx: f64, dy: f64, lambda_mm: f64) -> Array2<f64> {
+    let rows = convolve_rows(a, &kernel(dx, lambda_mm, a.ncols()));
+    let t = rows.t().as_standard_layout().into_owned();
+    let cols = convolve_rows(&t, &kernel(dy, lambda_mm, a.nrows()));
+    cols.t().as_standard_layout().into_owned()
+}
+
+/// Samples g_k = exp(-pi (k d / (alpha lambda))^2), k = -h..=h, truncated where g < 1e-9
+/// (|x| <= 2.6 alpha lambda) or at the line length (beyond it the kernel meets only zeros).
+fn kernel(d: f64, lambda_mm: f64, n: usize) -> Vec<f64> {
+    let s = gaussian_alpha() * lambda_mm;
+    let h = ((2.6 * s / d).ceil() as usize).min(n.saturating_sub(1));
+    (0..=2 * h)
+        .map(|i| {
+            let x = (i as f64 - h as f64) * d / s;
+            (-std::f64::consts::PI * x * x).exp()
+        })
+        .collect()
+}
+
+/// Linear convolution of every row of `a` with the symmetric kernel `g` (odd length 2h + 1,
+/// centred), zero outside the row, by zero-padded real FFTs.
+fn convolve_rows(a: &Array2<f64>, g: &[f64]) -> Array2<f64> {
+    let (rows, n) = a.dim();
+    let h = g.len() / 2;
+    if h == 0 {
+        return a.mapv(|v| v * g[0]);
+    }
+    let p = fast_len(n + h);
+    let mut planner = RealFftPlanner::<f64>::new();
+    let fwd: Arc<dyn RealToComplex<f64>> = planner.plan_fft_forward(p);
+    let inv: Arc<dyn ComplexToReal<f64>> = planner.plan_fft_inverse(p);
+    // Kernel spectrum: g placed circularly around index 0; real because g is symmetric.
+    let mut gk = vec![0.0; p];
+    for (i, &v) in g.iter().enumerate() {
+        let k = (i as isize - h as isize).rem_euclid(p as isize) as usize;
+        gk[k] += v;
+    }
+    let mut gspec = fwd.make_output_vec();
+    let _ = fwd.process(&mut gk, &mut gspec);
+    let scale = 1.0 / p as f64;
+    let gs: Vec<f64> = gspec.iter().map(|c| c.re * scale).collect();
+    let src = a.as_standard_layout();
+    let src = src.as_slice().unwrap_or(&[]);
+    let mut out = vec![0.0; rows * n];
+    out.par_chunks_mut(n).enumerate().for_each_init(
+        || {
+            (
+                fwd.make_input_vec(),
+                fwd.make_output_vec(),
+                fwd.make_scratch_vec(),
+                inv.make_scratch_vec(),
+            )
+        },
+        |(buf, spec, fs, is): &mut (Vec<f64>, Vec<Complex<f64>>, _, _), (i, dst)| {
+            buf[..n].copy_from_slice(&src[i * n..(i + 1) * n]);
+            buf[n..].fill(0.0);
+            // Lengths come from the plans, so these cannot fail.
+            let _ = fwd.process_with_scratch(buf, spec, fs);
+            for (c, &w) in spec.iter_mut().zip(&gs) {
+                *c *= w;
+            }
+            // A real signal's spectrum: the DC and Nyquist terms are real already.
+            if let Some(c) = spec.first_mut() {
+                c.im = 0.0;
+            }
+            if p.is_multiple_of(2) {
+                if let Some(c) = spec.last_mut() {
+                    c.im = 0.0;
+                }
+            }
+            let _ = inv.process_with_scratch(spec, buf, is);
+            dst.copy_from_slice(&buf[..n]);
+        },
+    );
+    Array2::from_shape_vec((rows, n), out).unwrap_or_else(|_| Array2::zeros((rows, n)))
+}
+
+/// Smallest length >= n of the form 2^a 3^b 5^c (fast for the FFT).
+fn fast_len(n: usize) -> usize {
+    let mut m = n.max(1);
+    loop {
+        let mut k = m;
+        for f in [2, 3, 5] {
+            while k.is_multiple_of(f) {
+                k /= f;
+            }
+        }
+        if k == 1 {
+            return m;
+        }
+        m += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bonnetlab_surface::rng::Rng;
+
+    /// Brute-force orthonormal DCT-II of a vector.
+    fn dct_brute(x: &[f64]) -> Vec<f64> {
+        let n = x.len();
+        (0..n)
+            .map(|k| {
+                let s: f64 = x
+                    .iter()
+                    .enumerate()
+                    .map(|(j, v)| {
+                        v * (std::f64::consts::PI * k as f64 * (2 * j + 1) as f64 / (2 * n) as f64)
+                            .cos()
+                    })
+                    .sum();
+                s * if k == 0 {
+                    (1.0 / n as f64).sqrt()
+                } else {
+                    (2.0 / n as f64).sqrt()
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn dct_matches_brute_force_and_inverts() {
+        let mut r = Rng::new(4);
+        for (ny, nx) in [(5, 8), (7, 13), (1, 4)] {
+            let a = Array2::from_shape_fn((ny, nx), |_| r.normal());
+            let d = dct_rows(&a, false);
+            for i in 0..ny {
+                let b = dct_brute(&a.row(i).to_vec());
+                for k in 0..nx {
+                    assert!((d[(i, k)] - b[k]).abs() < 1e-12, "{ny}x{nx} ({i},{k})");
+                }
+            }
+            let back = dct2(&dct2(&a, false), true);
+            for (x, y) in back.iter().zip(a.iter()) {
+                assert!((x - y).abs() < 1e-12);
+            }
+            // Orthonormal: Parseval.
+            let e0: f64 = a.iter().map(|v| v * v).sum();
+            let e1: f64 = dct2(&a, false).iter().map(|v| v * v).sum();
+            assert!((e0 - e1).abs() < 1e-10 * e0);
+        }
+    }
+
+    #[test]
+    fn fill_keeps_valid_pixels_and_takes_local_means() {
+        let (ny, nx) = (40, 50);
+        let z = Array2::from_shape_fn((ny, nx), |(i, j)| (i + 2 * j) as f64);
+        let mut v = Array2::from_elem((ny, nx), true);
+        v[(20, 25)] = false;
+        for i in 0..ny {
+            for j in 0..5 {
+                v[(i, j)] = false;
+            }
+        }
+        let zm = Array2::from_shape_fn((ny, nx), |ij| if v[ij] { z[ij] } else { 0.0 });
+        let f = fill_holes(&zm, &v, 0.1, 0.1);
+        for (ij, &ok) in v.indexed_iter() {
+            if ok {
+                assert_eq!(f[ij], zm[ij]);
+            }
+        }
+        // A single-pixel hole in a plane: the symmetric local mean is the plane's value.
+        assert!((f[(20, 25)] - z[(20, 25)]).abs() < 1e-9, "{}", f[(20, 25)]);
+        assert!(f.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn fast_lengths() {
+        assert_eq!(fast_len(7), 8);
+        assert_eq!(fast_len(251), 256);
+        assert_eq!(fast_len(121), 125);
+    }
+}
