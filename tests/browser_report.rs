@@ -1,31 +1,16 @@
 //! Opens the compare report in headless Chromium: takes a screenshot, checks it is not blank
-//! and that the page logged no console error. Skips (with a printed message) only when no
-//! Chromium binary exists; `.ci/run` installs Debian's `chromium`.
+//! and that the page logged no console error. Needs Chromium: without one (and `CI` not `true`)
+//! the build marks the test ignored and says so (tests/common/shared_data.rs); when it runs and
+//! finds none it fails. `.ci/run` installs Debian's `chromium`.
 //!
 //! A control page that throws proves the console-error detection can fail.
 
-use std::path::{Path, PathBuf};
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn find_browser() -> Option<PathBuf> {
-    let names = [
-        "chromium",
-        "chromium-browser",
-        "google-chrome",
-        "google-chrome-stable",
-    ];
-    let path = std::env::var_os("PATH")?;
-    for dir in std::env::split_paths(&path) {
-        for n in names {
-            let p = dir.join(n);
-            if p.is_file() {
-                return Some(p);
-            }
-        }
-    }
-    None
-}
 
 /// Runs headless Chromium on `html`, returns (screenshot PNG bytes, stderr log).
 fn screenshot(browser: &Path, html: &Path, work: &Path) -> (Vec<u8>, String) {
@@ -103,13 +88,12 @@ fn picture_stats(png: &[u8]) -> (f64, f64) {
 }
 
 #[test]
+#[cfg_attr(
+    no_chromium,
+    ignore = "needs chromium: apt-get install chromium or set BONNETLAB_CHROMIUM (README, Tests)"
+)]
 fn compare_report_renders_in_chromium_without_console_errors() {
-    let Some(browser) = find_browser() else {
-        println!(
-            "SKIPPED browser_report: no chromium binary on PATH (install Debian's `chromium`)"
-        );
-        return;
-    };
+    let browser = shared_data::chromium();
     let dir = tempfile::tempdir().unwrap();
     let samples = dir.path().join("samples");
     let report = dir.path().join("report");
