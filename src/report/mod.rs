@@ -4,6 +4,7 @@
 pub mod compare_report;
 pub mod comparison;
 pub mod font;
+pub mod format;
 pub mod html;
 pub mod maps;
 pub mod msf_prediction;
