@@ -1,31 +1,16 @@
 //! Opens the compare report in headless Chromium: takes a screenshot, checks it is not blank
-//! and that the page logged no console error. Skips (with a printed message) only when no
-//! Chromium binary exists; `.ci/run` installs Debian's `chromium`.
+//! and that the page logged no console error. Needs Chromium: without one (and `CI` not `true`)
+//! the build marks the test ignored and says so (tests/common/shared_data.rs); when it runs and
+//! finds none it fails. `.ci/run` installs Debian's `chromium`.
 //!
 //! A control page that throws proves the console-error detection can fail.
 
-use std::path::{Path, PathBuf};
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn find_browser() -> Option<PathBuf> {
-    let names = [
-        "chromium",
-        "chromium-browser",
-        "google-chrome",
-        "google-chrome-stable",
-    ];
-    let path = std::env::var_os("PATH")?;
-    for dir in std::env::split_paths(&path) {
-        for n in names {
-            let p = dir.join(n);
-            if p.is_file() {
-                return Some(p);
-            }
-        }
-    }
-    None
-}
 
 /// Runs headless Chromium on `html`, returns (screenshot PNG bytes, stderr log).
 fn screenshot(browser: &Path, html: &Path, work: &Path) -> (Vec<u8>, String) {
@@ -102,14 +87,127 @@ fn picture_stats(png: &[u8]) -> (f64, f64) {
     (var, ink)
 }
 
+/// Loads a copy of `html` with a measuring script in a 1280 px wide headless Chromium and
+/// returns, per table, the right edge of its visible box, and the page's scroll width.
+fn table_extents(browser: &Path, html: &Path, work: &Path) -> (Vec<f64>, f64) {
+    let page = std::fs::read_to_string(html).unwrap();
+    let script = "<script>window.addEventListener('load',()=>{const r=[];\
+        for(const t of document.querySelectorAll('table')){\
+        const b=(t.parentElement.className==='tablebox'?t.parentElement:t).getBoundingClientRect();\
+        r.push(b.right);}\
+        const p=document.createElement('pre');p.id='measure';\
+        p.textContent='MEASURE '+document.documentElement.scrollWidth+' '+r.join(' ');\
+        document.body.appendChild(p);});</script>";
+    let measured = work.join(format!(
+        "measure_{}",
+        html.file_name().unwrap().to_string_lossy()
+    ));
+    std::fs::write(
+        &measured,
+        page.replace("</body>", &format!("{script}</body>")),
+    )
+    .unwrap();
+    let profile = tempfile::tempdir().unwrap();
+    let o = Command::new(browser)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--hide-scrollbars",
+            "--window-size=1280,2000",
+            "--dump-dom",
+        ])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .arg(format!(
+            "file://{}",
+            measured.canonicalize().unwrap().display()
+        ))
+        .output()
+        .expect("start chromium");
+    let dom = String::from_utf8_lossy(&o.stdout);
+    let line = dom
+        .lines()
+        .find_map(|l| l.split("<pre id=\"measure\">MEASURE ").nth(1))
+        .unwrap_or_else(|| panic!("no measurement in the dumped DOM of {}", html.display()));
+    let line = line.split('<').next().unwrap();
+    let v: Vec<f64> = line
+        .split_whitespace()
+        .map(|x| x.parse().unwrap())
+        .collect();
+    (v[1..].to_vec(), v[0])
+}
+
+/// Every table of the compare and spots reports fits a 1280 px window (a wide table scrolls
+/// inside its own box); the spots tables were 1,840 and 2,200 px wide before.
 #[test]
-fn compare_report_renders_in_chromium_without_console_errors() {
-    let Some(browser) = find_browser() else {
-        println!(
-            "SKIPPED browser_report: no chromium binary on PATH (install Debian's `chromium`)"
-        );
-        return;
+#[cfg_attr(
+    no_chromium,
+    ignore = "needs chromium: apt-get install chromium or set BONNETLAB_CHROMIUM (README, Tests)"
+)]
+fn report_tables_fit_a_1280_px_window() {
+    let browser = shared_data::chromium();
+    let dir = tempfile::tempdir().unwrap();
+    let bin = env!("CARGO_BIN_EXE_bonnetlab");
+    let run = |args: &[&std::ffi::OsStr]| {
+        let o = Command::new(bin).args(args).output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     };
+    let d = dir.path();
+    let (samples, compare, spots_in, spots_out) = (
+        d.join("samples"),
+        d.join("compare"),
+        d.join("spots_in"),
+        d.join("spots_out"),
+    );
+    run(&[
+        "demo".as_ref(),
+        "--repeats".as_ref(),
+        "1".as_ref(),
+        "--generate-samples".as_ref(),
+        samples.as_os_str(),
+        "--out".as_ref(),
+        compare.as_os_str(),
+    ]);
+    run(&[
+        "spots".as_ref(),
+        "--make-sample".as_ref(),
+        spots_in.as_os_str(),
+    ]);
+    let manifest = spots_in.join("manifest.toml");
+    run(&[
+        "spots".as_ref(),
+        manifest.as_os_str(),
+        "--out".as_ref(),
+        spots_out.as_os_str(),
+    ]);
+    for html in [compare.join("report.html"), spots_out.join("report.html")] {
+        let (tables, page_w) = table_extents(&browser, &html, d);
+        assert!(!tables.is_empty(), "{}: no table measured", html.display());
+        assert!(
+            page_w <= 1280.0,
+            "{}: page {page_w} px wide",
+            html.display()
+        );
+        for (k, right) in tables.iter().enumerate() {
+            assert!(
+                *right <= 1280.0,
+                "{}: table {k} reaches {right} px in a 1280 px window",
+                html.display()
+            );
+        }
+    }
+}
+
+#[test]
+#[cfg_attr(
+    no_chromium,
+    ignore = "needs chromium: apt-get install chromium or set BONNETLAB_CHROMIUM (README, Tests)"
+)]
+fn compare_report_renders_in_chromium_without_console_errors() {
+    let browser = shared_data::chromium();
     let dir = tempfile::tempdir().unwrap();
     let samples = dir.path().join("samples");
     let report = dir.path().join("report");

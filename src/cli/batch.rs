@@ -35,6 +35,12 @@ pub struct Args {
     /// PSD window for the ripple check.
     #[arg(long, default_value = "hann")]
     pub window: String,
+    /// Pixel size in mm for maps whose file does not carry one (a file's own value wins).
+    #[arg(long, value_name = "MM")]
+    pub pixel_mm: Option<f64>,
+    /// Pixel size along Y (rows) in mm when it differs from --pixel-mm.
+    #[arg(long, value_name = "MM", requires = "pixel_mm")]
+    pub pixel_mm_y: Option<f64>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub jobs: Option<usize>,
@@ -94,9 +100,19 @@ pub fn list_inputs(input: &Path) -> Result<Vec<PathBuf>, CliError> {
 }
 
 /// One map's JSON line (an `error` object when it fails).
-pub fn map_line(file: &Path, terms: &[Term], pitch_mm: Option<f64>, window: Window) -> Value {
+pub fn map_line(
+    file: &Path,
+    terms: &[Term],
+    pitch_mm: Option<f64>,
+    window: Window,
+    pixel_mm: Option<(f64, f64)>,
+) -> Value {
     let result = (|| -> Result<Value, CliError> {
-        let s = read_map(file)?;
+        let mut s = read_map(file)?;
+        if let Some((px, py)) = pixel_mm {
+            s.dx_mm = Some(s.dx_mm.unwrap_or(px));
+            s.dy_mm = Some(s.dy_mm.unwrap_or(py));
+        }
         let report = stats_report(file, &s, terms, false)?;
         let mut v = serde_json::to_value(&report).map_err(|e| CliError::processing(file, e))?;
         if let Some(p) = pitch_mm {
@@ -118,9 +134,13 @@ pub fn map_line(file: &Path, terms: &[Term], pitch_mm: Option<f64>, window: Wind
         }
         Ok(v)
     })();
-    result.unwrap_or_else(
-        |e| json!({ "file": file.display().to_string(), "error": e.message, "exit_code": e.code }),
-    )
+    result.unwrap_or_else(|e| {
+        json!({
+            "file": file.display().to_string(),
+            "error": super::compare::hint_pixel_mm(e.message),
+            "exit_code": e.code
+        })
+    })
 }
 
 pub fn run(args: &Args) -> Result<(), CliError> {
@@ -135,6 +155,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             )));
         }
     }
+    let pixel_mm = super::compare::pixel_size(args.pixel_mm, args.pixel_mm_y)?;
     if args.jobs == Some(0) {
         return Err(CliError::usage("--jobs must be at least 1"));
     }
@@ -149,7 +170,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         files
             .par_iter()
             .map(|f| {
-                let v = map_line(f, &terms, args.pitch_mm, window);
+                let v = map_line(f, &terms, args.pitch_mm, window, pixel_mm);
                 bar.inc(1);
                 v
             })

@@ -26,9 +26,38 @@ pub struct Args {
     /// PSD window: hann, none, tukey, blackman, welch.
     #[arg(long, default_value = "hann")]
     pub window: String,
+    /// Pixel size in mm for maps whose file does not carry one (a file's own value wins).
+    #[arg(long, value_name = "MM")]
+    pub pixel_mm: Option<f64>,
+    /// Pixel size along Y (rows) in mm when it differs from --pixel-mm.
+    #[arg(long, value_name = "MM", requires = "pixel_mm")]
+    pub pixel_mm_y: Option<f64>,
     /// Output directory (created if missing).
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// `--pixel-mm [--pixel-mm-y]` as (dx, dy) in mm; both must be positive.
+pub fn pixel_size(x: Option<f64>, y: Option<f64>) -> Result<Option<(f64, f64)>, CliError> {
+    let Some(x) = x else { return Ok(None) };
+    let y = y.unwrap_or(x);
+    for (name, v) in [("--pixel-mm", x), ("--pixel-mm-y", y)] {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(CliError::usage(format!(
+                "{name} must be a positive number of mm, got {v}"
+            )));
+        }
+    }
+    Ok(Some((x, y)))
+}
+
+/// Points the user at `--pixel-mm` when a map's pixel size is unknown.
+pub fn hint_pixel_mm(message: String) -> String {
+    if message.contains("pixel size is unknown") && !message.contains("--pixel-mm") {
+        format!("{message} (use --pixel-mm MM)")
+    } else {
+        message
+    }
 }
 
 /// Turns the command-line words into run specs and settings.
@@ -48,6 +77,7 @@ pub fn parse(args: &Args) -> Result<(Vec<RunSpec>, Settings), CliError> {
             remove,
             window,
             pitch_mm: args.pitch_mm,
+            pixel_mm: pixel_size(args.pixel_mm, args.pixel_mm_y)?,
             ..Settings::default()
         },
     ))
@@ -56,7 +86,7 @@ pub fn parse(args: &Args) -> Result<(Vec<RunSpec>, Settings), CliError> {
 pub fn to_cli(e: CompareError) -> CliError {
     CliError {
         code: if e.bad_input { 2 } else { 1 },
-        message: e.to_string(),
+        message: hint_pixel_mm(e.to_string()),
     }
 }
 
@@ -95,5 +125,28 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         code: 2,
         message: e.to_string(),
     })?;
+    println!("{}", summary(&args.out, &c));
     Ok(())
+}
+
+/// The one line `compare` prints on success.
+pub fn summary(out: &Path, c: &Comparison) -> String {
+    let runs: Vec<String> = c
+        .runs
+        .iter()
+        .map(|r| {
+            format!(
+                "{} RMS {:.3} -> {:.3} nm (CR {:.1} %)",
+                r.name,
+                r.rms_before_nm,
+                r.rms_after_nm,
+                100.0 * r.cr_rms
+            )
+        })
+        .collect();
+    format!(
+        "compare: wrote {}: {}",
+        out.join("report.html").display(),
+        runs.join("; ")
+    )
 }

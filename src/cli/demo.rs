@@ -29,10 +29,12 @@ pub struct Args {
     /// Write the sample maps and README into this directory.
     #[arg(long, value_name = "DIR")]
     pub generate_samples: Option<PathBuf>,
-    /// Run the comparison on the samples and write the report into this directory.
+    /// Run the comparison on the samples and write the report into this directory (default
+    /// `reports/demo` when neither this nor --generate-samples is given).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
-    /// Where the samples are read from for `--out`.
+    /// Where the samples are read from for the report; when the folder does not exist the
+    /// samples are generated into OUT/samples first.
     #[arg(long, value_name = "DIR", default_value = "samples")]
     pub samples: PathBuf,
     /// Seed of the generated sample.
@@ -230,16 +232,37 @@ fn generate_samples(dir: &Path, seed: u64, repeats: usize) -> Result<(), CliErro
 }
 
 pub fn run(args: &Args) -> Result<(), CliError> {
-    if args.generate_samples.is_none() && args.out.is_none() {
-        return Err(CliError::usage(
-            "demo: give --out DIR (write the demo report) and/or --generate-samples DIR",
-        ));
-    }
     if let Some(dir) = &args.generate_samples {
         generate_samples(dir, args.seed, args.repeats)?;
     }
-    let Some(out) = &args.out else { return Ok(()) };
-    let samples = args.generate_samples.as_ref().unwrap_or(&args.samples);
+    let default_out = PathBuf::from("reports/demo");
+    let out = match (&args.out, &args.generate_samples) {
+        (Some(o), _) => o,
+        (None, None) => &default_out,
+        (None, Some(dir)) => {
+            println!(
+                "demo: wrote the sample maps (seed {}, {} repeats) to {}",
+                args.seed,
+                args.repeats,
+                dir.display()
+            );
+            return Ok(());
+        }
+    };
+    let generated = out.join("samples");
+    let samples = match &args.generate_samples {
+        Some(dir) => dir,
+        None if args.samples.is_dir() => &args.samples,
+        None => {
+            eprintln!(
+                "bonnetlab demo: no {} folder here; generating the samples into {}",
+                args.samples.display(),
+                generated.display()
+            );
+            generate_samples(&generated, args.seed, args.repeats)?;
+            &generated
+        }
+    };
     let runs = sample_runs(samples)?;
     let n: usize = runs.iter().map(|r| r.before.len() + r.after.len()).sum();
     eprintln!(
@@ -296,5 +319,17 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     for p in &written {
         eprintln!("  wrote {}", p.display());
     }
+    let crs: Vec<String> = c
+        .runs
+        .iter()
+        .map(|r| format!("{} CR(RMS) {:.1} %", r.name, 100.0 * r.cr_rms))
+        .collect();
+    println!(
+        "demo: wrote {} ({} runs, {n} maps from {}; {})",
+        out.join("report.html").display(),
+        c.runs.len(),
+        samples.display(),
+        crs.join(", ")
+    );
     Ok(())
 }

@@ -500,7 +500,12 @@ fn summary(r: &PsdReport) -> String {
     };
     line(format!(
         "{} ({}): {} x {} pixels, dx {} mm, dy {} mm",
-        r.file, r.format, r.rows, r.cols, r.dx_mm, r.dy_mm
+        r.file,
+        r.format,
+        r.rows,
+        r.cols,
+        crate::report::format::f32_value(r.dx_mm),
+        crate::report::format::f32_value(r.dy_mm)
     ));
     line(format!(
         "removed: {}; per-segment detrend: {:?}; window: {} (ENBW {:.3} bins); gaps <= {} px interpolated",
@@ -544,8 +549,8 @@ fn summary(r: &PsdReport) -> String {
                 l.line.a,
                 l.line.b,
                 l.sidedness,
-                l.line.f1_per_mm,
-                l.line.f2_per_mm,
+                crate::report::format::sig(l.line.f1_per_mm, 6),
+                crate::report::format::sig(l.line.f2_per_mm, 6),
                 l.worst_ratio,
                 l.worst_freq_per_mm,
                 if l.pass { "PASS" } else { "FAIL" }
@@ -645,6 +650,36 @@ fn write_plot(
             a.freq_per_mm[skip.min(a.freq_per_mm.len())..].to_vec(),
             a.psd_nm2_mm[skip.min(a.psd_nm2_mm.len())..].to_vec(),
         ));
+    }
+    // The limit line as tested (on the one-sided PSD: a two-sided A counts twice).
+    if let Some(l) = axis_rows(r).find_map(|(_, a)| a.limit.as_ref()) {
+        let line = l.line;
+        let scale = if line.two_sided { 2.0 } else { 1.0 };
+        let mut f: Vec<f64> = axis_rows(r)
+            .flat_map(|(_, a)| a.freq_per_mm[a.biased_bins.min(a.freq_per_mm.len())..].iter())
+            .copied()
+            .filter(|&f| f > 0.0 && f >= line.f1_per_mm && f <= line.f2_per_mm)
+            .collect();
+        f.sort_by(f64::total_cmp);
+        f.dedup();
+        let y = f
+            .iter()
+            .map(|&f| scale * line.a * f.powf(-line.b))
+            .collect();
+        plot = plot.series(
+            Series::new(
+                format!(
+                    "limit {} f^-{} ({})",
+                    crate::report::format::sig(line.a, 6),
+                    crate::report::format::sig(line.b, 6),
+                    l.sidedness
+                ),
+                f,
+                y,
+            )
+            .colour((0, 0, 0))
+            .dashed(),
+        );
     }
     if let Some(p) = pitch {
         plot = plot.grating_markers(p, harmonics);

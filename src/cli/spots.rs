@@ -101,6 +101,18 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     let text = std::fs::read_to_string(manifest)
         .map_err(|e| CliError::input(manifest, format!("cannot read: {e}")))?;
     let m = parse_manifest(manifest, &text).map_err(|e| CliError::input(manifest, e))?;
+    // Progress on stderr, drawn only on a terminal (reading, measuring, then the model fit,
+    // which takes most of the time).
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(m.spots.len() as u64),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}/{len}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_message("reading spot maps");
     let mut maps = Vec::with_capacity(m.spots.len());
     for e in &m.spots {
         let s = read_surface(&e.path).map_err(|err| CliError {
@@ -108,7 +120,10 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             message: format!("{err} (listed at {} line {})", manifest.display(), e.line),
         })?;
         maps.push(s);
+        bar.inc(1);
     }
+    bar.set_message("measuring spots and fitting the bonnet TIF models");
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
     let measured = measure_entries(&m, &maps).map_err(|(k, err)| {
         let e = &m.spots[k];
         CliError::processing(
@@ -117,11 +132,20 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         )
     })?;
     let (records, analyses): (Vec<SpotRecord>, Vec<SpotAnalysis>) = measured.into_iter().unzip();
+    let n_spots = records.len();
     let report = analyse_sweep(records, &start);
+    bar.finish_and_clear();
     write_outputs(out, manifest, &report, &analyses).map_err(|e| CliError {
         code: 2,
         message: e,
-    })
+    })?;
+    println!(
+        "spots: wrote {}: {n_spots} spots, {} sweeps, {} trend plots",
+        out.join("report.html").display(),
+        report.sweeps.len(),
+        report.trends.len()
+    );
+    Ok(())
 }
 
 /// The conventions written beside the numbers (JSON and HTML).
@@ -633,5 +657,9 @@ fn make_sample(dir: &Path) -> Result<(), CliError> {
         code: 2,
         message: e.to_string(),
     })?;
+    println!(
+        "spots: wrote a sample sweep to {} (manifest.toml and its spot maps)",
+        dir.display()
+    );
     Ok(())
 }

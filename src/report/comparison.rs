@@ -50,6 +50,8 @@ pub struct Settings {
     /// MSF band edges in mm^-1; the figure band is [0, msf.0], the HSF rest is not reported.
     pub msf_band_per_mm: (f64, f64),
     pub harmonics: usize,
+    /// Pixel size (dx, dy) in mm for maps whose file does not carry one (`--pixel-mm`).
+    pub pixel_mm: Option<(f64, f64)>,
 }
 
 impl Default for Settings {
@@ -60,6 +62,7 @@ impl Default for Settings {
             pitch_mm: None,
             msf_band_per_mm: MSF_BAND_PER_MM,
             harmonics: 5,
+            pixel_mm: None,
         }
     }
 }
@@ -355,11 +358,16 @@ pub fn compare(
     let read: Vec<Result<Surface, CompareError>> = files
         .par_iter()
         .map(|p| {
-            bonnetlab_io::read_surface(p).map_err(|e| CompareError {
+            let mut s = bonnetlab_io::read_surface(p).map_err(|e| CompareError {
                 file: None,
                 message: e.to_string(),
                 bad_input: e.exit_code() == 2,
-            })
+            })?;
+            if let Some((px, py)) = settings.pixel_mm {
+                s.dx_mm = Some(s.dx_mm.unwrap_or(px));
+                s.dy_mm = Some(s.dy_mm.unwrap_or(py));
+            }
+            Ok(s)
         })
         .collect();
     let mut read = read.into_iter();

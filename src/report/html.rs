@@ -51,7 +51,9 @@ impl Table {
     }
 
     fn render(&self) -> String {
-        let mut h = String::from("<table>");
+        // The box scrolls sideways when the table is wider than the page, so no table widens
+        // the page past its 1180 px column (a 1280 px window).
+        let mut h = String::from("<div class=\"tablebox\"><table>");
         if let Some(c) = &self.caption {
             h.push_str(&format!("<caption>{}</caption>", escape(c)));
         }
@@ -72,7 +74,7 @@ impl Table {
             }
             h.push_str("</tr>");
         }
-        h.push_str("</tbody></table>\n");
+        h.push_str("</tbody></table></div>\n");
         h
     }
 }
@@ -96,7 +98,8 @@ color:#222;background:#fff;line-height:1.4;padding:0 16px}\
 h1{font-size:1.6em;border-bottom:2px solid #0072b2;padding-bottom:4px}\
 h2{font-size:1.3em;margin-top:1.8em;border-bottom:1px solid #ccc}\
 h3{font-size:1.1em;margin-top:1.2em}\
-table{border-collapse:collapse;margin:0.6em 0 1.2em 0;font-size:0.92em}\
+div.tablebox{max-width:100%;overflow-x:auto;margin:0.6em 0 1.2em 0}\
+table{border-collapse:collapse;font-size:0.92em}\
 caption{text-align:left;font-weight:bold;padding:4px 0}\
 th,td{border:1px solid #bbb;padding:3px 8px}th{background:#eef3f8}\
 td.num{text-align:right;font-variant-numeric:tabular-nums}\

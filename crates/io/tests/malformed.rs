@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 
 use bonnetlab_io::{read_surface, IoError};
 
-fn real(name: &str) -> Option<Vec<u8>> {
-    common::real_dir().map(|d| std::fs::read(d.join(name)).unwrap())
+fn real(name: &str) -> Vec<u8> {
+    std::fs::read(common::real_dir().join(name)).unwrap()
 }
 
 /// Writes `bytes` as `name` in a temp dir and expects `read_surface` to fail.
@@ -48,8 +48,12 @@ const DAT: &str = "surfalize_test_1.dat";
 const DAT3: &str = "pyxsurf_03_flat04_differenceFiducials_nofid_verovero.dat";
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn truncated_dat() {
-    let Some(b) = real(DAT) else { return };
+    let b = real(DAT);
     expect(
         "t.dat",
         &b[..b.len() - 1],
@@ -65,8 +69,12 @@ fn truncated_dat() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn wrong_magic_and_inconsistent_triple() {
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     b[3] = 0x7F;
     expect(
         "m.dat",
@@ -81,7 +89,7 @@ fn wrong_magic_and_inconsistent_triple() {
         "header field magic_number",
         2,
     );
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     set_u16(&mut b, 4, 3);
     expect(
         "f.dat",
@@ -89,7 +97,7 @@ fn wrong_magic_and_inconsistent_triple() {
         "header field header_format = 3 does not match",
         2,
     );
-    let Some(mut b) = real(DAT3) else { return };
+    let mut b = real(DAT3);
     set_u32(&mut b, 6, 834);
     expect(
         "f3.dat",
@@ -100,8 +108,12 @@ fn wrong_magic_and_inconsistent_triple() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn dimensions_disagreeing_with_the_file_size() {
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     set_u16(&mut b, 68, 641);
     expect(
         "d.dat",
@@ -117,14 +129,18 @@ fn dimensions_disagreeing_with_the_file_size() {
         "truncated: file size 1844034 bytes, the header (cn_width 641",
         2,
     );
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     set_u16(&mut b, 52, 700);
     expect("d.dat", &b, "header field ac_n_bytes", 2);
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn huge_and_zero_dimensions_never_allocate() {
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     // 60000 x 60000 would be 14.4 GB of i32: must be refused from the header alone.
     set_u16(&mut b, 68, 60000);
     set_u16(&mut b, 70, 60000);
@@ -136,31 +152,35 @@ fn huge_and_zero_dimensions_never_allocate() {
         "disagrees with 4 x cn_width 60000 x cn_height 60000 = 14400000000",
         2,
     );
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     set_u16(&mut b, 52, 65535);
     set_u16(&mut b, 54, 65535);
     set_u16(&mut b, 56, 65535);
     set_u32(&mut b, 60, u32::MAX);
     expect("h.dat", &b, "header field ac_n_bytes", 2);
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     set_u16(&mut b, 68, 0);
     expect("z.dat", &b, "header field cn_width = 0 is zero", 2);
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     set_u16(&mut b, 70, 0);
     set_u32(&mut b, 72, 0);
     expect("z.dat", &b, "header field cn_height = 0 is zero", 2);
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn unknown_phase_res_and_bad_scale_fields() {
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     set_u16(&mut b, 218, 7);
     let msg = expect("p.dat", &b, "", 2);
     assert!(
         msg.ends_with("p.dat: header field phase_res = 7 is not 0, 1 or 2"),
         "{msg}"
     );
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     set_u32(&mut b, 168, 0f32.to_bits());
     expect(
         "w.dat",
@@ -168,14 +188,18 @@ fn unknown_phase_res_and_bad_scale_fields() {
         "header field wavelength_in = 0 must be positive",
         2,
     );
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     set_u32(&mut b, 184, (-1.0f32).to_bits());
     expect("l.dat", &b, "header field lateral_res = -1", 2);
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn no_valid_pixel_is_exit_code_1() {
-    let Some(mut b) = real(DAT) else { return };
+    let mut b = real(DAT);
     let start = b.len() - 4 * 640 * 480;
     for c in b[start..].chunks_exact_mut(4) {
         c.copy_from_slice(&2_147_483_640i32.to_be_bytes());
@@ -189,8 +213,8 @@ fn no_valid_pixel_is_exit_code_1() {
     );
 }
 
-fn asc_text() -> Option<String> {
-    real("pyxsurf_171212_PCO2_Zygo_data.asc").map(|b| String::from_utf8(b).unwrap())
+fn asc_text() -> String {
+    String::from_utf8(real("pyxsurf_171212_PCO2_Zygo_data.asc")).unwrap()
 }
 
 /// Replaces line `n` (1-based) of `text`.
@@ -203,8 +227,12 @@ fn with_line(text: &str, n: usize, new: &str) -> String {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn non_numeric_and_short_ascii() {
-    let Some(t) = asc_text() else { return };
+    let t = asc_text();
     // The first phase line follows the intensity block; corrupt a token deep in the phase block.
     let lines: Vec<&str> = t.lines().collect();
     let n = lines.len() - 3;
@@ -246,6 +274,10 @@ fn non_numeric_and_short_ascii() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn bad_datx() {
     expect(
         "x.datx",
@@ -253,9 +285,7 @@ fn bad_datx() {
         "not an HDF5 file",
         2,
     );
-    let Some(b) = real("monolithic_zygo_test.datx") else {
-        return;
-    };
+    let b = real("monolithic_zygo_test.datx");
     for cut in [8, 100, 2000, b.len() / 2, b.len() - 100] {
         let (e, _d, p) = fail("t.datx", &b[..cut]);
         let msg = e.to_string();
@@ -312,8 +342,12 @@ fn bad_csv_exr_and_unknown_content() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn bad_xyz() {
-    let Some(t) = asc_text() else { return };
+    let t = asc_text();
     let t = with_line(&t, 4, "59 21 2 2");
     let head: Vec<&str> = t.lines().take(15).collect();
     let mut x = head.join("\n").replacen(
@@ -342,12 +376,14 @@ fn bad_xyz() {
 /// Seeded random corruptions (byte flips, truncations, header-field overwrites) of real files
 /// of every format: each parse returns Ok or Err, never panics.
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn random_corruptions_never_panic() {
     use bonnetlab_io::{detect_format, parse_bytes};
     use bonnetlab_surface::rng::Rng;
-    let Some(dir) = common::real_dir() else {
-        return;
-    };
+    let dir = common::real_dir();
     let mut rng = Rng::new(20_240_601);
     let asc = std::fs::read(dir.join("pyxsurf_171212_PCO2_Zygo_data.asc")).unwrap();
     let files = [
@@ -388,10 +424,12 @@ fn random_corruptions_never_panic() {
 /// The surface dataspace (rows, cols as two u64 LE) is overwritten: a contiguous surface
 /// larger than the file, or over the pixel cap, is refused before anything is allocated for it.
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn datx_surface_dimensions_beyond_the_file() {
-    let Some(b) = real("monolithic_zygo_test.datx") else {
-        return;
-    };
+    let b = real("monolithic_zygo_test.datx");
     let mut dims = [0u8; 16];
     dims[..8].copy_from_slice(&259u64.to_le_bytes());
     dims[8..].copy_from_slice(&33u64.to_le_bytes());

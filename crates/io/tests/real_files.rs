@@ -130,7 +130,7 @@ const GOLDEN: &[Golden] = &[
 ];
 
 fn check(g: &Golden) {
-    let Some(dir) = real_dir() else { return };
+    let dir = real_dir();
     let s = read_surface(&dir.join(g.file)).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(s.provenance.format, g.format, "{}", g.file);
     assert_eq!(s.dim(), (g.rows, g.cols), "{}", g.file);
@@ -169,6 +169,10 @@ fn check(g: &Golden) {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn every_real_zygo_file_matches_its_golden_values() {
     let mut seen = 0;
     for g in GOLDEN {
@@ -179,8 +183,12 @@ fn every_real_zygo_file_matches_its_golden_values() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn provenance_of_a_newview_dat() {
-    let Some(dir) = real_dir() else { return };
+    let dir = real_dir();
     let s = read_surface(&dir.join("surfalize_test_1.dat")).unwrap();
     let p = &s.provenance;
     assert_eq!(p.wavelength_m.map(|w| (w * 1e9).round()), Some(570.0));
@@ -231,8 +239,12 @@ fn provenance_of_a_newview_dat() {
 
 /// Each .asc equals its .dat twin within one count, with the same mask.
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn asc_equals_its_dat_twin_within_one_count() {
-    let Some(dir) = real_dir() else { return };
+    let dir = real_dir();
     for stem in [
         "pyxsurf_05_C1S01",
         "pyxsurf_07_PCO1.3S04",
@@ -275,8 +287,12 @@ fn asc_equals_its_dat_twin_within_one_count() {
 /// The XYZ layout of spec §4 (unverified against a real file): built here from a real .asc
 /// header and its phase data (X, Y in camera pixels incl. cn_org, Z in µm, `No Data`).
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn xyz_built_from_a_real_asc_reads_the_same_map() {
-    let Some(dir) = real_dir() else { return };
+    let dir = real_dir();
     let asc_path = dir.join("pyxsurf_171212_PCO2_Zygo_data.asc");
     let asc = read_surface(&asc_path).unwrap();
     let text = std::fs::read_to_string(&asc_path).unwrap();
@@ -317,8 +333,12 @@ fn xyz_built_from_a_real_asc_reads_the_same_map() {
 
 /// A Windows (CRLF) copy of a real .asc reads identically.
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn crlf_asc_reads_like_lf() {
-    let Some(dir) = real_dir() else { return };
+    let dir = real_dir();
     let p = dir.join("pyxsurf_20191018_01c_flat01_difffiducials.asc");
     let lf = read_surface(&p).unwrap();
     let text = std::fs::read_to_string(&p).unwrap().replace('\n', "\r\n");

@@ -3,29 +3,18 @@
 
 #![allow(dead_code)]
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use bonnetlab_surface::{height_stats, remove_terms, Surface, Term};
 
-/// `shared/data/real`, found by walking up from this crate (the repository may be cloned next to
-/// `shared/` or inside it). `None` (and a printed note) when it is absent, so a clone without the
-/// shared data still passes.
-pub fn real_dir() -> Option<PathBuf> {
-    if let Ok(d) = std::env::var("BONNETLAB_REAL_DATA") {
-        return Some(PathBuf::from(d));
-    }
-    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
-    for anc in here.ancestors() {
-        let cand = anc.join("shared").join("data").join("real");
-        if cand.is_dir() {
-            return Some(cand);
-        }
-    }
-    eprintln!(
-        "skipping: shared/data/real not found above {}",
-        here.display()
-    );
-    None
+#[path = "../../../../tests/common/shared_data.rs"]
+pub mod shared_data;
+
+/// `shared/data/real` (see `tests/common/shared_data.rs` at the workspace root). Panics with
+/// instructions when the data is absent; tests that call it are marked
+/// `#[cfg_attr(no_shared_data, ignore = ...)]` so a clone without the data lists them as ignored.
+pub fn real_dir() -> PathBuf {
+    shared_data::data_dir("real")
 }
 
 /// PV and RMS (nm) after removing `terms`.
