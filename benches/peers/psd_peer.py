@@ -7,7 +7,8 @@ For every map with a pixel size in the given directories:
     (the segment choice before issue #19), and `--radial --window none` for the 2-D check;
   * SurfaceTopography (ContactEngineering) 1.x: read_topography (its own readers), plane
     detrend (`detrend('height')`), `power_spectrum_from_profile(window='hann')` (raw bins) and
-    the 2-D map of `power_spectrum_from_area(window=None, return_map=True)`, averaged over
+    the 2-D map of `power_spectrum_from_area(window='None', return_map=True)` (the string
+    'None': its window=None means a radial Hann on non-periodic maps), averaged over
     bonnetlab's radial bins (width max(dfx, dfy), centred on b dfr) so the bins are identical.
 SurfaceTopography refuses maps with missing data; for those its
 `interpolate_undefined_data()` (harmonic fill) is used first and the row says so.
@@ -16,7 +17,7 @@ Conventions (shared/spec/metrology.md): SurfaceTopography's C1D(q) [m^3], q = 2 
 has mean square (1/pi) sum_{q >= 0} C1D dq, so our one-sided P1(f) [nm^2 mm] = 2 C1D * 1e21;
 its C2D(q) [m^4] equals our two-sided P2 [nm^2 mm^2] times 1e-24.
 
-Usage: psd_peer.py BONNETLAB_BINARY DATA_DIR [DATA_DIR ...]
+Usage: psd_peer.py BONNETLAB_BINARY DATA_DIR_OR_FILE [...]
 Prints a Markdown table and one JSON line per file.
 """
 
@@ -27,7 +28,7 @@ import subprocess
 import sys
 
 import numpy as np
-from SurfaceTopography import read_topography
+from SurfaceTopography import Topography, read_topography
 
 UNIT_M = {"m": 1.0, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "nm": 1e-9}
 
@@ -88,6 +89,9 @@ def main():
     binary = sys.argv[1]
     files = []
     for d in sys.argv[2:]:
+        if os.path.isfile(d):
+            files.append(d)
+            continue
         for name in sorted(os.listdir(d)):
             if name.rsplit(".", 1)[-1] in ("dat", "asc", "datx", "xyz"):
                 files.append(os.path.join(d, name))
@@ -99,7 +103,7 @@ def main():
     for path in files:
         new, err = ours(binary, path, "--radial", "--window", "hann")
         if new is None:
-            print(f"| {os.path.basename(path)} | skipped: {err} |||||||")
+            print(f"| {os.path.basename(path)} | skipped: bonnetlab: {err.splitlines()[0][-90:]} |||||||")
             continue
         old, _ = ours(
             binary, path, "--window", "hann", "--min-segment-fraction", "0.5",
@@ -109,31 +113,35 @@ def main():
         try:
             t = read_topography(path)
         except Exception as e:  # a reader SurfaceTopography lacks or a file it cannot size
-            print(f"| {os.path.basename(path)} | skipped: SurfaceTopography cannot read it ({e}) |||||||")
+            why = str(e).strip().splitlines()[0][:80]
+            print(f"| {os.path.basename(path)} | skipped: SurfaceTopography cannot read it ({why}) |||||||")
             continue
         unit = UNIT_M.get(str(t.unit), None)
         if unit is None:
             print(f"| {os.path.basename(path)} | skipped: SurfaceTopography unit {t.unit} |||||||")
             continue
+        # SurfaceTopography's heights on bonnetlab's pixel size (the readers disagree on the
+        # lateral calibration of some MetroPro files; the PSD normalisation is what is compared
+        # here), in mm for both heights and lengths.
+        h = np.ma.masked_invalid(t.heights()) * (unit / 1e-3)
+        nx, ny = t.nb_grid_pts
+        if (ny, nx) != (new["rows"], new["cols"]):
+            print(f"| {os.path.basename(path)} | skipped: grid {nx}x{ny} vs ours |||||||")
+            continue
+        dx_mm, dy_mm = new["dx_mm"], new["dy_mm"]
+        t = Topography(h, (nx * dx_mm, ny * dy_mm), unit="mm")
         fill = "none"
         if t.has_undefined_data:
             t = t.interpolate_undefined_data()
             fill = "harmonic"
         t = t.detrend("height")
         q, c = t.power_spectrum_from_profile(window="hann", resampling_method=None, reliable=False)
-        # q in 1/unit, C in unit^3 -> 1/mm and nm^2 mm
-        scale_len = 1e-3 / unit  # (1/unit) -> (1/mm): q_per_mm = q * unit / 1e-3
-        q_mm = q / scale_len  # angular frequency per mm
-        c_nm2mm = c * (unit / 1e-9) ** 2 * (unit / 1e-3)
-        r1 = compare_1d(new["x"], q_mm * 1.0, c_nm2mm, 1.0)
-        nx, ny = t.nb_grid_pts
+        # q in rad/mm, C1D in mm^3 -> nm^2 mm: x 1e12
+        r1 = compare_1d(new["x"], q, c * 1e12, 1.0)
         _, _, cmap = t.power_spectrum_from_area(
-            window=None, nb_points_per_decade=10, reliable=False, return_map=True
+            window="None", nb_points_per_decade=10, reliable=False, return_map=True
         )
-        to_nm2mm2 = (unit / 1e-9) ** 2 * (unit / 1e-3) ** 2
-        sx, sy = t.physical_sizes
-        dx_mm, dy_mm = sx * unit / 1e-3 / nx, sy * unit / 1e-3 / ny
-        r2 = compare_radial(none["radial"], cmap, dx_mm, dy_mm, nx, ny, to_nm2mm2)
+        r2 = compare_radial(none["radial"], cmap, dx_mm, dy_mm, nx, ny, 1e12)
 
         def fmt(r):
             if r is None or len(r) == 0:
