@@ -155,13 +155,21 @@ fn readme(seed: u64, repeats: usize) -> String {
     s.push_str(&format!(
         "    cargo run --release -- demo --generate-samples samples --seed {seed} --repeats {repeats}\n\n"
     ));
-    s.push_str("Then compare them (what the README's first command does):\n\n");
-    s.push_str("    cargo run --release -- demo --out reports/demo\n\n");
-    s.push_str("which is the same as\n\n");
+    s.push_str("Then write the demo report from them (what the README's first command does):\n\n");
+    s.push_str("    cargo run --release -- demo\n\n");
+    s.push_str(
+        "(`demo --out DIR` writes it elsewhere; `demo` never changes `samples/`). Its report is the\n\
+         report of\n\n",
+    );
     s.push_str(
         "    bonnetlab compare --pitch-mm 3 --out reports/demo \\\n      \
          --run original=samples/original/before_1.dat+samples/original/before_2.dat,samples/original/after_1.dat+samples/original/after_2.dat \\\n      \
          --run suppression=samples/suppression/before_1.dat+samples/suppression/before_2.dat,samples/suppression/after_1.dat+samples/suppression/after_2.dat\n\n",
+    );
+    s.push_str(
+        "with one more section: the MSF each bonnet is predicted to leave (the vibration coupling on a\n\
+         run matching the sample), which `compare` on maps alone cannot give. The `runs` of both\n\
+         `report.json` files are identical (`tests/docs_examples.rs`).\n\n",
     );
     s.push_str("## What is in the maps\n\n");
     s.push_str(&format!(

@@ -1,0 +1,168 @@
+//! A new user's first hour (issue #17): `demo` with no arguments, one-line summaries on
+//! stdout, `--pixel-mm` where a map may lack its pixel size, and numbers printed to their
+//! precision.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
+}
+
+fn ok(o: &Output) -> String {
+    assert!(
+        o.status.success(),
+        "exit {:?}: {}",
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8(o.stdout.clone()).unwrap()
+}
+
+/// A 64 x 64 CSV map with no pixel size (CSV without a `# dx_mm=` header carries none).
+fn csv_without_pixel_size(path: &Path, phase: f64) {
+    let mut t = String::new();
+    for i in 0..64 {
+        let row: Vec<String> = (0..64)
+            .map(|j| {
+                let v = 20.0 * ((i as f64) * 0.7 + phase).sin() + 5.0 * ((j as f64) * 0.3).cos();
+                format!("{v:.4}")
+            })
+            .collect();
+        t.push_str(&row.join(","));
+        t.push('\n');
+    }
+    std::fs::write(path, t).unwrap();
+}
+
+#[test]
+fn demo_with_no_arguments_writes_the_report_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = bin().arg("demo").current_dir(dir.path()).output().unwrap();
+    let out = ok(&o);
+    let report = dir.path().join("reports/demo/report.html");
+    assert!(report.is_file(), "no report at {}", report.display());
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines.len(), 1, "stdout: {out}");
+    assert!(
+        lines[0].starts_with("demo: wrote reports/demo/report.html"),
+        "{out}"
+    );
+}
+
+#[test]
+fn compare_and_batch_take_the_pixel_size_when_the_file_lacks_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (b, a) = (d.join("b.csv"), d.join("a.csv"));
+    csv_without_pixel_size(&b, 0.0);
+    csv_without_pixel_size(&a, 0.5);
+    let run = format!("r={},{}", b.display(), a.display());
+    // Without it: exit 2, and the message names the flag.
+    let o = bin()
+        .args(["compare", "--run", &run, "--out"])
+        .arg(d.join("no"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--pixel-mm"), "{err}");
+    // With it: the report and a one-line summary naming it.
+    let out = d.join("yes");
+    let o = bin()
+        .args(["compare", "--run", &run, "--pixel-mm", "0.5", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stdout = ok(&o);
+    assert_eq!(stdout.lines().count(), 1, "{stdout}");
+    assert!(stdout.starts_with("compare: wrote "), "{stdout}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let text = json.to_string();
+    assert!(text.contains("0.5"), "pixel size not used: {text:.400}");
+    // Rectangular pixels.
+    let o = bin()
+        .args([
+            "compare",
+            "--run",
+            &run,
+            "--pixel-mm",
+            "0.5",
+            "--pixel-mm-y",
+            "0.25",
+            "--out",
+        ])
+        .arg(d.join("rect"))
+        .output()
+        .unwrap();
+    ok(&o);
+    // A bad value is a usage error.
+    let o = bin()
+        .args(["compare", "--run", &run, "--pixel-mm", "-1", "--out"])
+        .arg(d.join("bad"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+
+    // batch: the ripple needs the pixel size; without it the line is an error naming the flag.
+    let o = bin()
+        .args(["batch", "--pitch-mm", "3"])
+        .arg(&b)
+        .output()
+        .unwrap();
+    let line = String::from_utf8_lossy(&o.stdout);
+    assert!(line.contains("--pixel-mm"), "{line}");
+    let o = bin()
+        .args(["batch", "--pitch-mm", "3", "--pixel-mm", "0.5"])
+        .arg(&b)
+        .output()
+        .unwrap();
+    let line = ok(&o);
+    let v: serde_json::Value = serde_json::from_str(line.lines().next().unwrap()).unwrap();
+    assert!(v.get("error").is_none(), "{line}");
+    assert!(v.get("ripple").is_some(), "{line}");
+}
+
+#[test]
+fn spots_prints_one_line_on_success() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let o = bin()
+        .args(["spots", "--make-sample"])
+        .arg(d.join("in"))
+        .output()
+        .unwrap();
+    assert_eq!(ok(&o).lines().count(), 1);
+    let o = bin()
+        .arg("spots")
+        .arg(d.join("in/manifest.toml"))
+        .arg("--out")
+        .arg(d.join("out"))
+        .output()
+        .unwrap();
+    let out = ok(&o);
+    assert_eq!(out.lines().count(), 1, "{out}");
+    assert!(out.starts_with("spots: wrote "), "{out}");
+}
+
+#[test]
+fn psd_prints_the_pixel_size_to_its_precision() {
+    let dir = tempfile::tempdir().unwrap();
+    let samples = dir.path().join("s");
+    let o = bin()
+        .args(["demo", "--repeats", "1", "--generate-samples"])
+        .arg(&samples)
+        .output()
+        .unwrap();
+    ok(&o);
+    let o = bin()
+        .arg("psd")
+        .arg(samples.join("original/before_1.dat"))
+        .output()
+        .unwrap();
+    let out = ok(&o);
+    // The .dat stores the pixel size as f32: 0.4 mm, not 0.39999998989515007.
+    assert!(out.contains("dx 0.4 mm, dy 0.4 mm"), "{out}");
+    assert!(!out.contains("0.3999999"), "{out}");
+}
