@@ -19,7 +19,7 @@ impl CliError {
     pub fn input(file: impl AsRef<Path>, what: impl fmt::Display) -> Self {
         CliError {
             code: EXIT_BAD_INPUT,
-            message: format!("{}: {}", file.as_ref().display(), what),
+            message: named(file.as_ref(), what),
         }
     }
 
@@ -35,8 +35,59 @@ impl CliError {
     pub fn processing(file: impl AsRef<Path>, what: impl fmt::Display) -> Self {
         CliError {
             code: EXIT_PROCESSING,
-            message: format!("{}: {}", file.as_ref().display(), what),
+            message: named(file.as_ref(), what),
         }
+    }
+
+    /// An output file that cannot be written (a missing directory, no permission, a special
+    /// file, an input of the command, a full disk): exit code 2, the file named once.
+    pub fn output(file: impl AsRef<Path>, e: &std::io::Error) -> Self {
+        CliError {
+            code: EXIT_BAD_INPUT,
+            message: format!("{}: cannot write: {}", file.as_ref().display(), io_what(e)),
+        }
+    }
+
+    /// Standard output cannot be written (for example `> /dev/full`): exit code 1.
+    pub fn stdout(e: &std::io::Error) -> Self {
+        CliError {
+            code: EXIT_PROCESSING,
+            message: format!("stdout: cannot write: {}", io_what(e)),
+        }
+    }
+
+    /// The reader of standard output went away (`| head`): the command ends quietly, exit 0,
+    /// as Unix filters do.
+    pub fn closed_pipe() -> Self {
+        CliError {
+            code: 0,
+            message: String::new(),
+        }
+    }
+
+    /// Whether this is the quiet end of [`CliError::closed_pipe`].
+    pub fn is_closed_pipe(&self) -> bool {
+        self.code == 0 && self.message.is_empty()
+    }
+}
+
+/// `FILE: WHAT`, naming the file once even when WHAT already starts with it.
+fn named(file: &Path, what: impl fmt::Display) -> String {
+    let what = what.to_string();
+    let f = file.display().to_string();
+    if what.starts_with(&format!("{f}: ")) {
+        what
+    } else {
+        format!("{f}: {what}")
+    }
+}
+
+/// An I/O error's text on one line, without Rust's "(os error N)" suffix.
+pub fn io_what(e: &std::io::Error) -> String {
+    let s = e.to_string().replace(['\n', '\r'], " ");
+    match s.find(" (os error ") {
+        Some(i) => s[..i].to_string(),
+        None => s,
     }
 }
 
