@@ -131,7 +131,12 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SpotsError> {
 
 /// Reads and parses a manifest file.
 pub fn read_manifest(path: &Path) -> Result<Manifest, SpotsError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SpotsError::Manifest {
+    let text = bonnetlab_io::input::read_text(
+        path,
+        bonnetlab_io::input::TEXT_LIMIT,
+        "a spot manifest (TOML or CSV)",
+    )
+    .map_err(|e| SpotsError::Manifest {
         at: "file".into(),
         what: format!("cannot read: {e}"),
     })?;
