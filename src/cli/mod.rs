@@ -104,6 +104,14 @@ pub fn stdout_error(e: &std::io::Error) -> CliError {
     }
 }
 
+/// Reads a text input (recipe, list, manifest): a regular file of at most
+/// `bonnetlab_io::input::TEXT_LIMIT` bytes of UTF-8, registered as an input so no output of the
+/// command may replace it. `what` names the expected format in the error.
+pub fn read_text_input(path: &Path, what: &str) -> Result<String, CliError> {
+    bonnetlab_io::input::read_text(path, bonnetlab_io::input::TEXT_LIMIT, what)
+        .map_err(|e| CliError::input(path, format!("cannot read: {}", error::io_what(&e))))
+}
+
 /// Whether an output path means stdout (`-`).
 pub fn is_stdout(path: &Path) -> bool {
     path.as_os_str() == "-"
