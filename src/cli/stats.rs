@@ -4,7 +4,6 @@
 //! the height parameters of the residual over the valid pixels: a JSON object with `--json`
 //! (stable field order, no time stamps), a small table otherwise.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use bonnetlab_surface::{
@@ -169,9 +168,5 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     } else {
         table(&report)
     };
-    // A closed pipe is not worth a panic: report it as one line instead.
-    std::io::stdout()
-        .lock()
-        .write_all(text.as_bytes())
-        .map_err(|e| CliError::processing(&args.file, format!("cannot write to stdout: {e}")))
+    super::write_stdout(text.as_bytes())
 }
