@@ -215,6 +215,14 @@ fn parse_toml(text: &str, base: &Path) -> Result<Manifest, SpotsError> {
             })?;
         }
     }
+    if let (Some(a), Some(b)) = (d.ring_inner_mm, d.ring_outer_mm) {
+        if a >= b {
+            return Err(SpotsError::Manifest {
+                at: "[defaults] key 'ring_outer_mm'".into(),
+                what: format!("{b} must be larger than ring_inner_mm = {a}"),
+            });
+        }
+    }
     Ok(Manifest {
         spots,
         ring_inner_mm: d.ring_inner_mm,
