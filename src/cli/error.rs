@@ -75,10 +75,42 @@ impl CliError {
 fn named(file: &Path, what: impl fmt::Display) -> String {
     let what = what.to_string();
     let f = file.display().to_string();
-    if what.starts_with(&format!("{f}: ")) {
+    let tag = format!("{f}: ");
+    if f.is_empty() {
         what
+    } else if what.starts_with(&tag) {
+        what
+    } else if what.contains(&tag) {
+        // "invalid argument: FILE: ..." from a lower layer: keep one naming, at the start.
+        format!("{f}: {}", what.replacen(&tag, "", 1))
     } else {
         format!("{f}: {what}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_file_is_named_once() {
+        let e = CliError::input("case.toml", "invalid argument: case.toml: bad key");
+        assert_eq!(e.message, "case.toml: invalid argument: bad key");
+        let e = CliError::processing("a.dat", "a.dat: no valid pixel");
+        assert_eq!(e.message, "a.dat: no valid pixel");
+        let e = CliError::input("a.dat", "bad");
+        assert_eq!(e.message, "a.dat: bad");
+    }
+
+    #[test]
+    fn io_errors_are_one_line_without_os_codes() {
+        let e = std::io::Error::from_raw_os_error(28);
+        assert_eq!(
+            CliError::stdout(&e).message,
+            "stdout: cannot write: No space left on device"
+        );
+        assert_eq!(CliError::stdout(&e).code, 1);
+        assert_eq!(CliError::output("x.json", &e).code, 2);
     }
 }
 
