@@ -258,7 +258,8 @@ fn write_outputs(
     };
     set.json("report.json", &json).map_err(w)?;
     let rows: Vec<Vec<String>> = rep.spots.iter().map(spot_row).collect();
-    set.bytes("spots.csv", &csv_bytes(&SPOT_COLUMNS, &rows)?).map_err(w)?;
+    set.bytes("spots.csv", &csv_bytes(&SPOT_COLUMNS, &rows)?)
+        .map_err(w)?;
     let mut trows = Vec::new();
     for t in &rep.trends {
         for l in &t.lines {
@@ -284,7 +285,8 @@ fn write_outputs(
         "measured",
         "predicted",
     ];
-    set.bytes("trends.csv", &csv_bytes(&th, &trows)?).map_err(w)?;
+    set.bytes("trends.csv", &csv_bytes(&th, &trows)?)
+        .map_err(w)?;
     let mut models = Vec::new();
     for f in &rep.fits {
         if let Ok(text) = model_toml(f) {
