@@ -76,9 +76,7 @@ fn named(file: &Path, what: impl fmt::Display) -> String {
     let what = what.to_string();
     let f = file.display().to_string();
     let tag = format!("{f}: ");
-    if f.is_empty() {
-        what
-    } else if what.starts_with(&tag) {
+    if f.is_empty() || what.starts_with(&tag) {
         what
     } else if what.contains(&tag) {
         // "invalid argument: FILE: ..." from a lower layer: keep one naming, at the start.
@@ -87,6 +85,23 @@ fn named(file: &Path, what: impl fmt::Display) -> String {
         format!("{f}: {what}")
     }
 }
+
+/// An I/O error's text on one line, without Rust's "(os error N)" suffix.
+pub fn io_what(e: &std::io::Error) -> String {
+    let s = e.to_string().replace(['\n', '\r'], " ");
+    match s.find(" (os error ") {
+        Some(i) => s[..i].to_string(),
+        None => s,
+    }
+}
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for CliError {}
 
 #[cfg(test)]
 mod tests {
@@ -113,20 +128,3 @@ mod tests {
         assert_eq!(CliError::output("x.json", &e).code, 2);
     }
 }
-
-/// An I/O error's text on one line, without Rust's "(os error N)" suffix.
-pub fn io_what(e: &std::io::Error) -> String {
-    let s = e.to_string().replace(['\n', '\r'], " ");
-    match s.find(" (os error ") {
-        Some(i) => s[..i].to_string(),
-        None => s,
-    }
-}
-
-impl fmt::Display for CliError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.message)
-    }
-}
-
-impl std::error::Error for CliError {}

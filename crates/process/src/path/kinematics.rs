@@ -91,7 +91,7 @@ pub fn apply_limits(
             f64::INFINITY
         };
     }
-    if !(pieces <= MAX_RETIME_POINTS as f64) {
+    if pieces.is_nan() || pieces > MAX_RETIME_POINTS as f64 {
         return Err(ProcessError::invalid(format!(
             "the path is {length:.4e} mm long: re-timing it in {ds_max_mm} mm steps needs \
              {pieces:.3e} points, over the limit of {MAX_RETIME_POINTS} (check the path log's \
