@@ -55,6 +55,8 @@ pub enum Command {
 
 /// Runs a parsed command line; returns the process exit code and prints any error as one line.
 pub fn run(cli: Cli) -> i32 {
+    // No output of a command may replace one of its inputs.
+    bonnetlab_io::input::enable_input_guard();
     let result = match &cli.command {
         Command::Stats(a) => stats::run(a),
         Command::Psd(a) => psd::run(a),

@@ -14,7 +14,8 @@
 //! - The destination, for both: an existing regular file is replaced; a symbolic link is
 //!   followed (the file it points to is replaced, the link is kept; a link to nothing is
 //!   refused); a FIFO, device, socket or directory is refused (write to stdout with `-` instead);
-//!   a file this process has read as an input ([`crate::input`]) is refused.
+//!   with the input guard on ([`crate::input::enable_input_guard`], as the CLI does), a file this
+//!   process has read as an input is refused.
 
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufWriter, Write};
@@ -467,6 +468,7 @@ mod tests {
 
     #[test]
     fn an_input_is_never_overwritten() {
+        crate::input::enable_input_guard();
         let d = tempfile::tempdir().unwrap();
         let p = d.path().join("in.csv");
         fs::write(&p, b"1,2\n").unwrap();

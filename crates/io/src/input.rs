@@ -31,6 +31,19 @@ enum FileId {
 }
 
 static INPUTS: Mutex<Vec<(FileId, PathBuf)>> = Mutex::new(Vec::new());
+static GUARD: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Turns on the input guard for this process: from now on every file read through this module
+/// is remembered, and [`crate::atomic`] refuses to write over one. A command-line program calls
+/// this once at start ("no output of a command replaces one of its inputs"); a library user that
+/// reads and rewrites its own files leaves it off.
+pub fn enable_input_guard() {
+    GUARD.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+fn guard_on() -> bool {
+    GUARD.load(std::sync::atomic::Ordering::Relaxed)
+}
 
 fn file_id(path: &Path, meta: &std::fs::Metadata) -> FileId {
     #[cfg(unix)]
@@ -46,8 +59,12 @@ fn file_id(path: &Path, meta: &std::fs::Metadata) -> FileId {
     }
 }
 
-/// Remembers `path` as an input of this process (outputs may not replace it).
+/// Remembers `path` as an input of this process (outputs may not replace it), when the guard
+/// is on ([`enable_input_guard`]).
 pub fn register_input(path: &Path) {
+    if !guard_on() {
+        return;
+    }
     if let Ok(meta) = std::fs::metadata(path) {
         let id = file_id(path, &meta);
         let mut g = INPUTS.lock().unwrap_or_else(|e| e.into_inner());
@@ -60,6 +77,9 @@ pub fn register_input(path: &Path) {
 /// If the existing file at `path` (symbolic links followed) is an input read by this process,
 /// the path under which it was read.
 pub fn input_named(path: &Path) -> Option<PathBuf> {
+    if !guard_on() {
+        return None;
+    }
     let meta = std::fs::metadata(path).ok()?;
     let id = file_id(path, &meta);
     let g = INPUTS.lock().unwrap_or_else(|e| e.into_inner());
@@ -199,6 +219,7 @@ mod tests {
 
     #[test]
     fn regular_file_is_read_and_registered() {
+        enable_input_guard();
         let d = tempfile::tempdir().unwrap();
         let p = d.path().join("a.txt");
         std::fs::write(&p, "hello").unwrap();
