@@ -4,7 +4,9 @@
 use clap::Parser;
 
 fn main() {
-    // clap itself exits with code 2 on a usage error.
-    let cli = bonnetlab::cli::Cli::parse();
+    let cli = match bonnetlab::cli::Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => std::process::exit(bonnetlab::cli::usage_error(&e)),
+    };
     std::process::exit(bonnetlab::cli::run(cli));
 }

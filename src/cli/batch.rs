@@ -27,7 +27,7 @@ pub struct Args {
     /// A directory of maps, a manifest (one map path per line), or a single map.
     pub input: PathBuf,
     /// Grating spacing in mm: adds each map's `ripple` object.
-    #[arg(long)]
+    #[arg(long, value_parser = super::num::positive)]
     pub pitch_mm: Option<f64>,
     /// Form terms removed before the statistics and the PSD (comma list).
     #[arg(long, default_value = "piston,tilt")]
@@ -41,8 +41,8 @@ pub struct Args {
     /// Pixel size along Y (rows) in mm when it differs from --pixel-mm.
     #[arg(long, value_name = "MM", requires = "pixel_mm")]
     pub pixel_mm_y: Option<f64>,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads, 1 to 1024 (default: all cores).
+    #[arg(long, value_parser = super::num::jobs)]
     pub jobs: Option<usize>,
 }
 
@@ -77,8 +77,7 @@ pub fn list_inputs(input: &Path) -> Result<Vec<PathBuf>, CliError> {
     if is_map_file(input) {
         return Ok(vec![input.to_path_buf()]);
     }
-    let text = std::fs::read_to_string(input)
-        .map_err(|e| CliError::input(input, format!("cannot read the manifest: {e}")))?;
+    let text = super::read_text_input(input, "a list of map paths")?;
     let base = input.parent().unwrap_or(Path::new(""));
     let v: Vec<PathBuf> = text
         .lines()
@@ -185,18 +184,15 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         None => work(),
     };
     bar.finish_and_clear();
-    let mut out = std::io::stdout().lock();
     let mut failed = 0;
+    let mut text = String::new();
     for v in &lines {
         if v.get("error").is_some() {
             failed += 1;
         }
-        use std::io::Write;
-        // A closed stdout (e.g. piped into `head`) ends the output quietly.
-        if writeln!(out, "{v}").is_err() {
-            break;
-        }
+        text.push_str(&format!("{v}\n"));
     }
+    super::write_stdout(text.as_bytes())?;
     if failed > 0 {
         return Err(CliError {
             code: 1,

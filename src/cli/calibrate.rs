@@ -51,8 +51,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         .map_err(|e| CliError::processing(&args.recipe, e))?
         + "\n";
     if let Some(out) = &args.json {
-        bonnetlab_io::atomic::write_atomic(out, text.as_bytes())
-            .map_err(|e| CliError::input(out, format!("cannot write: {e}")))?;
+        super::emit(out, text.as_bytes())?;
     }
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
@@ -66,7 +65,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             .map_err(|e| CliError::input(&h, format!("cannot write: {e}")))?;
     }
     if args.json.is_none() && args.out.is_none() {
-        print!("{text}");
+        super::write_stdout(text.as_bytes())?;
     }
     Ok(())
 }

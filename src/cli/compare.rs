@@ -18,7 +18,7 @@ pub struct Args {
     #[arg(long = "run", value_name = "NAME=BEFORE,AFTER", required = true)]
     pub runs: Vec<String>,
     /// Grating (raster) spacing in mm: enables the ripple check and the f0 markers.
-    #[arg(long)]
+    #[arg(long, value_parser = super::num::positive)]
     pub pitch_mm: Option<f64>,
     /// Form terms removed from every map before PV / RMS / PSD (comma list).
     #[arg(long, default_value = "piston,tilt")]

@@ -40,8 +40,8 @@ pub struct Args {
     /// Seed of the generated sample.
     #[arg(long, default_value_t = SAMPLE_SEED)]
     pub seed: u64,
-    /// Repeat measurements per map in the generated sample.
-    #[arg(long, default_value_t = 2)]
+    /// Repeat measurements per map in the generated sample (1 to 10000).
+    #[arg(long, default_value_t = 2, value_parser = super::num::repeats)]
     pub repeats: usize,
 }
 

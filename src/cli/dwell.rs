@@ -239,8 +239,8 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     let text =
         serde_json::to_string_pretty(report).map_err(|e| CliError::processing(&args.case, e))?;
     match &args.json {
-        Some(p) => report::write::json(p, report).map_err(|e| CliError::input(&e.file, e.what))?,
-        None => println!("{text}"),
+        Some(p) => super::emit_json(p, report)?,
+        None => super::println_stdout(&text)?,
     }
     Ok(())
 }

@@ -1,6 +1,9 @@
 //! Command-line interface: one file per subcommand. The contract (names, flags, JSON fields)
 //! is `shared/spec/interfaces.md`; each file owns its `Args` and `run`.
 
+use std::io::Write;
+use std::path::Path;
+
 use clap::{Parser, Subcommand};
 
 pub mod batch;
@@ -52,6 +55,8 @@ pub enum Command {
 
 /// Runs a parsed command line; returns the process exit code and prints any error as one line.
 pub fn run(cli: Cli) -> i32 {
+    // No output of a command may replace one of its inputs.
+    bonnetlab_io::input::enable_input_guard();
     let result = match &cli.command {
         Command::Stats(a) => stats::run(a),
         Command::Psd(a) => psd::run(a),
@@ -66,9 +71,176 @@ pub fn run(cli: Cli) -> i32 {
     };
     match result {
         Ok(()) => 0,
+        Err(e) if e.is_closed_pipe() => 0,
         Err(e) => {
             eprintln!("bonnetlab: {}", e.message.replace('\n', " "));
             e.code
+        }
+    }
+}
+
+/// Writes bytes to stdout and flushes, checking every write: a failed write (`> /dev/full`) is
+/// [`CliError::stdout`] (exit 1, one line); a closed pipe (`| head -c1`) is
+/// [`CliError::closed_pipe`] (the command ends quietly, exit 0). Never panics, unlike `print!`.
+pub fn write_stdout(bytes: &[u8]) -> Result<(), CliError> {
+    let mut out = std::io::stdout().lock();
+    out.write_all(bytes)
+        .and_then(|()| out.flush())
+        .map_err(|e| stdout_error(&e))
+}
+
+/// [`write_stdout`] of a text followed by a newline (the checked `println!`).
+pub fn println_stdout(text: &str) -> Result<(), CliError> {
+    let mut s = String::with_capacity(text.len() + 1);
+    s.push_str(text);
+    s.push('\n');
+    write_stdout(s.as_bytes())
+}
+
+/// The CLI error for a failed write to stdout.
+pub fn stdout_error(e: &std::io::Error) -> CliError {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        CliError::closed_pipe()
+    } else {
+        CliError::stdout(e)
+    }
+}
+
+/// Reads a text input (recipe, list, manifest): a regular file of at most
+/// `bonnetlab_io::input::TEXT_LIMIT` bytes of UTF-8, registered as an input so no output of the
+/// command may replace it. `what` names the expected format in the error.
+pub fn read_text_input(path: &Path, what: &str) -> Result<String, CliError> {
+    bonnetlab_io::input::read_text(path, bonnetlab_io::input::TEXT_LIMIT, what)
+        .map_err(|e| CliError::input(path, format!("cannot read: {}", error::io_what(&e))))
+}
+
+/// Whether an output path means stdout (`-`).
+pub fn is_stdout(path: &Path) -> bool {
+    path.as_os_str() == "-"
+}
+
+/// Writes one output: to stdout when `path` is `-` (every command's `--json -`), otherwise to
+/// the file atomically (see `bonnetlab_io::atomic`: never over an input or a special file).
+/// An unwritable file is exit 2 naming it once.
+pub fn emit(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
+    if is_stdout(path) {
+        write_stdout(bytes)
+    } else {
+        bonnetlab_io::atomic::write_atomic(path, bytes).map_err(|e| CliError::output(path, &e))
+    }
+}
+
+/// Writes a value as pretty JSON with a trailing newline through [`emit`].
+pub fn emit_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), CliError> {
+    let mut text = serde_json::to_string_pretty(value)
+        .map_err(|e| CliError::processing(path, format!("JSON: {e}")))?;
+    text.push('\n');
+    emit(path, text.as_bytes())
+}
+
+/// Command-line number parsers (clap `value_parser`s): a number that is not finite or out of
+/// range is a usage error at parse time, naming the option's value.
+pub mod num {
+    fn f(s: &str) -> Result<f64, String> {
+        let v: f64 = s
+            .trim()
+            .parse()
+            .map_err(|_| format!("'{s}' is not a number"))?;
+        if !v.is_finite() {
+            return Err(format!("'{s}' is not a finite number"));
+        }
+        Ok(v)
+    }
+
+    /// Any finite number.
+    pub fn finite(s: &str) -> Result<f64, String> {
+        f(s)
+    }
+
+    /// A finite number > 0.
+    pub fn positive(s: &str) -> Result<f64, String> {
+        let v = f(s)?;
+        if v > 0.0 {
+            Ok(v)
+        } else {
+            Err(format!("'{s}' must be > 0"))
+        }
+    }
+
+    /// A finite number >= 0.
+    pub fn non_negative(s: &str) -> Result<f64, String> {
+        let v = f(s)?;
+        if v >= 0.0 {
+            Ok(v)
+        } else {
+            Err(format!("'{s}' must be >= 0"))
+        }
+    }
+
+    fn count(s: &str, lo: usize, hi: usize) -> Result<usize, String> {
+        let v: u128 = s
+            .trim()
+            .parse()
+            .map_err(|_| format!("'{s}' is not a whole number"))?;
+        if v < lo as u128 || v > hi as u128 {
+            return Err(format!("'{s}' must be between {lo} and {hi}"));
+        }
+        Ok(v as usize)
+    }
+
+    /// A harmonic count: 0 to 1000.
+    pub fn harmonics(s: &str) -> Result<usize, String> {
+        count(s, 0, 1000)
+    }
+
+    /// A worker thread count: 1 to 1024.
+    pub fn jobs(s: &str) -> Result<usize, String> {
+        count(s, 1, 1024)
+    }
+
+    /// A repeat count: 1 to 10000.
+    pub fn repeats(s: &str) -> Result<usize, String> {
+        count(s, 1, 10_000)
+    }
+
+    /// A gap length in pixels: 0 to 1,000,000.
+    pub fn pixels(s: &str) -> Result<usize, String> {
+        count(s, 0, 1_000_000)
+    }
+}
+
+/// Reports a command-line parse error: `--help` and `--version` print in full (exit 0, write
+/// errors checked); a usage error is one line on stderr (exit 2), ending with where to look.
+pub fn usage_error(e: &clap::Error) -> i32 {
+    use clap::error::ErrorKind;
+    match e.kind() {
+        ErrorKind::DisplayHelp
+        | ErrorKind::DisplayVersion
+        | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+            let text = e.render().to_string();
+            if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand {
+                eprint!("{text}");
+                return 2;
+            }
+            match write_stdout(text.as_bytes()) {
+                Ok(()) => 0,
+                Err(err) if err.is_closed_pipe() => 0,
+                Err(err) => {
+                    eprintln!("bonnetlab: {}", err.message);
+                    err.code
+                }
+            }
+        }
+        _ => {
+            let text = e.render().to_string();
+            let first = text
+                .lines()
+                .map(str::trim)
+                .find(|l| !l.is_empty())
+                .unwrap_or("invalid arguments");
+            let first = first.strip_prefix("error: ").unwrap_or(first);
+            eprintln!("bonnetlab: {first} (see bonnetlab --help)");
+            2
         }
     }
 }

@@ -12,7 +12,6 @@
 //! spectra in long form; `--plot` draws both PSDs log-log with the grating frequency and its
 //! harmonics marked.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use bonnetlab_spectrum::{
@@ -58,10 +57,10 @@ pub struct Args {
     #[arg(long, default_value = "hann")]
     pub window: String,
     /// Taper fraction of the Tukey window (0 = none, 1 = Hann).
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = 0.5, value_parser = super::num::non_negative)]
     pub tukey_alpha: f64,
     /// Raster pitch (grating spacing) in mm: adds the ripple check at f0 = 1/pitch along Y.
-    #[arg(long)]
+    #[arg(long, value_parser = super::num::positive)]
     pub pitch_mm: Option<f64>,
     /// Comma list of form terms removed jointly from the whole map before the PSDs.
     #[arg(long, default_value = "piston,tilt")]
@@ -70,7 +69,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "mean")]
     pub detrend: DetrendArg,
     /// Longest dropout (pixels) inside a line that is filled by linear interpolation.
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 5, value_parser = super::num::pixels)]
     pub max_gap_px: usize,
     /// Shortest line segment analysed, pixels. Every segment at least this long is used, each
     /// from its own first unbiased bin (ceil(b N / m) for a segment of m of N samples) up.
@@ -84,11 +83,11 @@ pub struct Args {
     /// nm^2 mm^2, and azimuthally integrated, nm^2 mm).
     #[arg(long)]
     pub radial: bool,
-    /// Highest ripple harmonic considered.
-    #[arg(long, default_value_t = 5)]
+    /// Highest ripple harmonic considered (0 to 1000).
+    #[arg(long, default_value_t = 5, value_parser = super::num::harmonics)]
     pub harmonics: usize,
     /// Prominence (dB over the flanking median) at which the ripple counts as detected.
-    #[arg(long, default_value_t = bonnetlab_spectrum::PROMINENCE_THRESHOLD_DB)]
+    #[arg(long, default_value_t = bonnetlab_spectrum::PROMINENCE_THRESHOLD_DB, value_parser = super::num::finite)]
     pub prominence_threshold_db: f64,
     /// MSF band edges F1,F2 in mm^-1 (default 1/33,1/0.12 i.e. periods 33 mm to 0.12 mm).
     #[arg(long, value_name = "F1,F2")]
@@ -218,10 +217,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     } else {
         summary(&report)
     };
-    let mut out = std::io::stdout().lock();
-    // A closed pipe is not an error worth reporting.
-    let _ = writeln!(out, "{text}");
-    Ok(())
+    super::println_stdout(&text)
 }
 
 fn options(args: &Args) -> Result<PsdOptions, CliError> {
@@ -622,8 +618,7 @@ fn write_csv(out: &Path, r: &PsdReport) -> Result<(), CliError> {
             }
         }
     }
-    bonnetlab_io::atomic::write_atomic(out, text.as_bytes())
-        .map_err(|e| CliError::processing(out, format!("cannot write: {e}")))
+    bonnetlab_io::atomic::write_atomic(out, text.as_bytes()).map_err(|e| CliError::output(out, &e))
 }
 
 fn write_plot(
@@ -689,6 +684,5 @@ fn write_plot(
         _ => plot.to_png(),
     }
     .map_err(|e| CliError::processing(out, e))?;
-    bonnetlab_io::atomic::write_atomic(out, &bytes)
-        .map_err(|e| CliError::processing(out, format!("cannot write: {e}")))
+    bonnetlab_io::atomic::write_atomic(out, &bytes).map_err(|e| CliError::output(out, &e))
 }

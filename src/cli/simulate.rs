@@ -411,7 +411,7 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
 
 /// Whether the recipe file has a `[process]` table (the parsed recipe fills defaults).
 fn has_process_table(recipe_file: &Path) -> bool {
-    std::fs::read_to_string(recipe_file)
+    bonnetlab_io::input::read_text(recipe_file, bonnetlab_io::input::TEXT_LIMIT, "a recipe")
         .ok()
         .and_then(|t| t.parse::<toml::Table>().ok())
         .is_some_and(|t| t.contains_key("process"))

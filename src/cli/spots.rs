@@ -98,8 +98,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         return Err(CliError::usage("spots: give MANIFEST and --out DIR"));
     };
     let start = start_of(args)?;
-    let text = std::fs::read_to_string(manifest)
-        .map_err(|e| CliError::input(manifest, format!("cannot read: {e}")))?;
+    let text = super::read_text_input(manifest, "a spot manifest (TOML or CSV)")?;
     let m = parse_manifest(manifest, &text).map_err(|e| CliError::input(manifest, e))?;
     // Progress on stderr, drawn only on a terminal (reading, measuring, then the model fit,
     // which takes most of the time).
@@ -274,17 +273,17 @@ fn write_outputs(
     rep: &SweepReport,
     analyses: &[SpotAnalysis],
 ) -> Result<(), String> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| format!("{}: cannot create the directory: {e}", dir.display()))?;
     let w = |e: write::WriteError| e.to_string();
+    let mut set = write::Set::begin(dir).map_err(w)?;
     let json = JsonOut {
         manifest: manifest.display().to_string(),
         conventions: conventions().into_iter().collect(),
         report: rep,
     };
-    write::json(&dir.join("report.json"), &json).map_err(w)?;
+    set.json("report.json", &json).map_err(w)?;
     let rows: Vec<Vec<String>> = rep.spots.iter().map(spot_row).collect();
-    write::bytes(&dir.join("spots.csv"), &csv_bytes(&SPOT_COLUMNS, &rows)?).map_err(w)?;
+    set.bytes("spots.csv", &csv_bytes(&SPOT_COLUMNS, &rows)?)
+        .map_err(w)?;
     let mut trows = Vec::new();
     for t in &rep.trends {
         for l in &t.lines {
@@ -310,18 +309,19 @@ fn write_outputs(
         "measured",
         "predicted",
     ];
-    write::bytes(&dir.join("trends.csv"), &csv_bytes(&th, &trows)?).map_err(w)?;
+    set.bytes("trends.csv", &csv_bytes(&th, &trows)?)
+        .map_err(w)?;
     let mut models = Vec::new();
     for f in &rep.fits {
         if let Ok(text) = model_toml(f) {
             let name = format!("model_{}.toml", stem(&f.bonnet));
-            write::bytes(&dir.join(&name), text.as_bytes()).map_err(w)?;
+            set.bytes(&name, text.as_bytes()).map_err(w)?;
             models.push((f.bonnet.clone(), name, text));
         }
     }
     let html = render_html(manifest, rep, analyses, &models)?;
-    write::bytes(&dir.join("report.html"), html.as_bytes()).map_err(w)?;
-    Ok(())
+    set.bytes("report.html", html.as_bytes()).map_err(w)?;
+    set.commit().map_err(w)
 }
 
 fn render_html(

@@ -8,7 +8,6 @@
 //! Gaussian filters, bands that add up to Sq exactly; a band the map cannot resolve is null
 //! with a reason).
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use bonnetlab_spectrum::{band_split, ArealBands, BAND_EDGES_DEFAULT_PER_MM};
@@ -245,9 +244,5 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     } else {
         table(&report)
     };
-    // A closed pipe is not worth a panic: report it as one line instead.
-    std::io::stdout()
-        .lock()
-        .write_all(text.as_bytes())
-        .map_err(|e| CliError::processing(&args.file, format!("cannot write to stdout: {e}")))
+    super::write_stdout(text.as_bytes())
 }

@@ -100,8 +100,7 @@ fn bonnet_out(p: &VibrationParams, bonnet: Bonnet) -> BonnetOut {
 }
 
 fn read_recipe(path: &Path) -> Result<toml::Table, CliError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| CliError::input(path, format!("cannot read: {e}")))?;
+    let text = super::read_text_input(path, "a recipe (TOML)")?;
     text.parse::<toml::Table>().map_err(|e| {
         CliError::input(
             path,
@@ -158,13 +157,9 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             serde_json::to_string_pretty(&outs)
         }
         .map_err(|e| CliError::processing(json_path, e))?;
-        if json_path.as_os_str() == "-" {
-            emit(&format!("{text}\n"));
-        } else {
-            write_atomic(json_path, text.as_bytes())?;
-        }
+        super::emit(json_path, format!("{text}\n").as_bytes())?;
     } else {
-        emit(&summary(&params, &outs));
+        super::write_stdout(summary(&params, &outs).as_bytes())?;
     }
 
     if let Some(dir) = &args.out {
@@ -175,12 +170,6 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         write_timeseries(&params, bonnets[0], dir, args.duration_s, pulses, args.seed)?;
     }
     Ok(())
-}
-
-/// Writes to stdout; a closed pipe (`| head`) is not an error worth a panic.
-fn emit(text: &str) {
-    let mut out = std::io::stdout().lock();
-    let _ = out.write_all(text.as_bytes()).and_then(|_| out.flush());
 }
 
 fn summary(p: &VibrationParams, outs: &[BonnetOut]) -> String {

@@ -104,16 +104,13 @@ pub fn write_report_with(
     c: &Comparison,
     predicted_msf: Option<&[PredictedMsf]>,
 ) -> Result<Vec<PathBuf>, ReportError> {
-    std::fs::create_dir_all(dir).map_err(|e| {
-        ReportError(format!(
-            "{}: cannot create the directory: {e}",
-            dir.display()
-        ))
-    })?;
+    // Everything is rendered before anything is staged, and staged before anything is published.
+    let html = render_html_with(c, predicted_msf)?;
+    let mut set = write::Set::begin(dir)?;
     let mut written = Vec::new();
     let json_path = dir.join("report.json");
-    write::json(
-        &json_path,
+    set.json(
+        "report.json",
         &ReportJson {
             comparison: c,
             predicted_msf,
@@ -126,9 +123,10 @@ pub fn write_report_with(
             ("y", &r.psd.y_before, &r.psd.y_after),
         ] {
             if let (Some(b), Some(a)) = (b, a) {
-                let p = dir.join(format!("psd_{axis}_{stem}.csv"));
-                write::csv_columns(
-                    &p,
+                let name = format!("psd_{axis}_{stem}.csv");
+                let p = dir.join(&name);
+                set.csv_columns(
+                    &name,
                     &["freq_per_mm", "psd_before_nm2_mm", "psd_after_nm2_mm"],
                     &[&b.freq_per_mm, &b.psd_nm2_mm, &a.psd_nm2_mm],
                 )?;
@@ -137,8 +135,9 @@ pub fn write_report_with(
         }
     }
     let html_path = dir.join("report.html");
-    write::bytes(&html_path, render_html_with(c, predicted_msf)?.as_bytes())?;
+    set.bytes("report.html", html.as_bytes())?;
     written.push(html_path);
+    set.commit()?;
     Ok(written)
 }
 

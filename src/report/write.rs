@@ -1,5 +1,8 @@
 //! JSON and CSV output files, written whole or not at all through `bonnetlab_io::atomic`
 //! (temporary file in the same directory, then rename), so a pipeline never reads half a report.
+//! A report of several files in one `--out` directory goes through [`Set`]: every file is staged
+//! first, under the directory's lock, and published only when all are written, so a failure
+//! part-way leaves the directory as it was and two runs never mix their files.
 //!
 //! JSON is pretty-printed with a trailing newline; CSV has a header row and one row per
 //! sample, numbers in Rust's shortest round-trip form (so files are byte-stable across runs).
@@ -23,20 +26,15 @@ fn werr(path: &Path, e: impl std::fmt::Display) -> WriteError {
     }
 }
 
-/// Writes bytes atomically.
-pub fn bytes(path: &Path, data: &[u8]) -> Result<(), WriteError> {
-    bonnetlab_io::atomic::write_atomic(path, data).map_err(|e| werr(path, e))
-}
-
-/// Writes a value as pretty JSON, atomically.
-pub fn json<T: Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), WriteError> {
+/// Encodes a value as pretty JSON with a trailing newline.
+fn json_text<T: Serialize + ?Sized>(path: &Path, value: &T) -> Result<String, WriteError> {
     let mut text = serde_json::to_string_pretty(value).map_err(|e| werr(path, e))?;
     text.push('\n');
-    bytes(path, text.as_bytes())
+    Ok(text)
 }
 
-/// Writes columns of equal length as CSV (shorter columns leave empty cells), atomically.
-pub fn csv_columns(path: &Path, header: &[&str], columns: &[&[f64]]) -> Result<(), WriteError> {
+/// Encodes columns as CSV (see [`csv_columns`]).
+fn csv_text(path: &Path, header: &[&str], columns: &[&[f64]]) -> Result<Vec<u8>, WriteError> {
     let rows = columns.iter().map(|c| c.len()).max().unwrap_or(0);
     let mut w = csv::Writer::from_writer(Vec::new());
     w.write_record(header).map_err(|e| werr(path, e))?;
@@ -47,7 +45,73 @@ pub fn csv_columns(path: &Path, header: &[&str], columns: &[&[f64]]) -> Result<(
             .collect();
         w.write_record(&rec).map_err(|e| werr(path, e))?;
     }
-    let data = w.into_inner().map_err(|e| werr(path, e))?;
+    w.into_inner().map_err(|e| werr(path, e))
+}
+
+/// A set of files published together into one directory (`bonnetlab_io::atomic::OutputSet`):
+/// nothing in the directory changes until [`Set::commit`]; dropping the set uncommitted leaves
+/// the directory as it was.
+pub struct Set {
+    inner: bonnetlab_io::atomic::OutputSet,
+}
+
+impl Set {
+    /// Creates `dir` if needed and takes its lock (a second run writing there is refused).
+    pub fn begin(dir: &Path) -> Result<Set, WriteError> {
+        bonnetlab_io::atomic::OutputSet::begin(dir)
+            .map(|inner| Set { inner })
+            .map_err(|e| werr(dir, e))
+    }
+
+    /// The final path of `name` in the directory.
+    pub fn path(&self, name: &str) -> std::path::PathBuf {
+        self.inner.dir().join(name)
+    }
+
+    /// Stages bytes as `name`.
+    pub fn bytes(&mut self, name: &str, data: &[u8]) -> Result<(), WriteError> {
+        let p = self.path(name);
+        self.inner.write(name, data).map_err(|e| werr(&p, e))
+    }
+
+    /// Stages a value as pretty JSON.
+    pub fn json<T: Serialize + ?Sized>(&mut self, name: &str, value: &T) -> Result<(), WriteError> {
+        let text = json_text(&self.path(name), value)?;
+        self.bytes(name, text.as_bytes())
+    }
+
+    /// Stages columns as CSV.
+    pub fn csv_columns(
+        &mut self,
+        name: &str,
+        header: &[&str],
+        columns: &[&[f64]],
+    ) -> Result<(), WriteError> {
+        let data = csv_text(&self.path(name), header, columns)?;
+        self.bytes(name, &data)
+    }
+
+    /// Publishes every staged file.
+    pub fn commit(self) -> Result<(), WriteError> {
+        let dir = self.inner.dir().to_path_buf();
+        self.inner.commit().map_err(|e| werr(&dir, e))
+    }
+}
+
+/// Writes bytes atomically.
+pub fn bytes(path: &Path, data: &[u8]) -> Result<(), WriteError> {
+    bonnetlab_io::atomic::write_atomic(path, data).map_err(|e| werr(path, e))
+}
+
+/// Writes a value as pretty JSON, atomically.
+pub fn json<T: Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), WriteError> {
+    let text = json_text(path, value)?;
+    bytes(path, text.as_bytes())
+}
+
+/// Writes columns of equal length as CSV (shorter columns leave empty cells), atomically.
+pub fn csv_columns(path: &Path, header: &[&str], columns: &[&[f64]]) -> Result<(), WriteError> {
+    let data = csv_text(path, header, columns)?;
     bytes(path, &data)
 }
 

@@ -14,6 +14,7 @@ mod datx_bounds;
 pub mod detect;
 pub mod error;
 pub mod exr_map;
+pub mod input;
 pub mod metropro_asc;
 pub mod metropro_dat;
 pub mod metropro_dat_write;
@@ -30,13 +31,27 @@ pub use detect::{detect_format, MapFormat};
 pub use error::{IoError, ParseError};
 
 /// Reads a surface map of any supported format, detected by content.
+///
+/// Only regular files of at most [`input::MAP_LIMIT`] bytes are read (a FIFO or a device is
+/// refused before it is opened), and the format is detected from the first 4 KiB before the
+/// rest is read, so a huge file with a wrong signature is refused at once.
 pub fn read_surface(path: &Path) -> Result<Surface, IoError> {
-    let bytes = std::fs::read(path).map_err(|e| IoError::read(path, e))?;
-    let fmt = detect_format(&bytes, path).map_err(|e| IoError::parse(path, e))?;
+    let (head, len) = input::read_head(path, input::MAP_LIMIT, DETECT_BYTES)
+        .map_err(|e| IoError::read(path, e))?;
+    let fmt = detect_format(&head, path).map_err(|e| IoError::parse(path, e))?;
+    let bytes = if (head.len() as u64) < len {
+        drop(head);
+        input::read_bounded(path, input::MAP_LIMIT).map_err(|e| IoError::read(path, e))?
+    } else {
+        head
+    };
     let mut s = parse_bytes(&bytes, fmt).map_err(|e| IoError::parse(path, e))?;
     s.provenance.source_path = Some(path.display().to_string());
     Ok(s)
 }
+
+/// How many leading bytes format detection looks at (it never reads further).
+const DETECT_BYTES: usize = 4096;
 
 /// Parses bytes already known to be in format `fmt`.
 pub fn parse_bytes(bytes: &[u8], fmt: MapFormat) -> Result<Surface, ParseError> {

@@ -147,7 +147,12 @@ impl Ctx<'_> {
 impl Recipe {
     /// Reads and validates a recipe file.
     pub fn load(path: &Path) -> Result<Recipe, ProcessError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ProcessError::Io {
+        let text = bonnetlab_io::input::read_text(
+            path,
+            bonnetlab_io::input::TEXT_LIMIT,
+            "a recipe (TOML)",
+        )
+        .map_err(|e| ProcessError::Io {
             file: path.to_path_buf(),
             what: e.to_string(),
         })?;

@@ -131,7 +131,12 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SpotsError> {
 
 /// Reads and parses a manifest file.
 pub fn read_manifest(path: &Path) -> Result<Manifest, SpotsError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SpotsError::Manifest {
+    let text = bonnetlab_io::input::read_text(
+        path,
+        bonnetlab_io::input::TEXT_LIMIT,
+        "a spot manifest (TOML or CSV)",
+    )
+    .map_err(|e| SpotsError::Manifest {
         at: "file".into(),
         what: format!("cannot read: {e}"),
     })?;
@@ -208,6 +213,14 @@ fn parse_toml(text: &str, base: &Path) -> Result<Manifest, SpotsError> {
                 at: format!("[defaults] key '{key}'"),
                 what,
             })?;
+        }
+    }
+    if let (Some(a), Some(b)) = (d.ring_inner_mm, d.ring_outer_mm) {
+        if a >= b {
+            return Err(SpotsError::Manifest {
+                at: "[defaults] key 'ring_outer_mm'".into(),
+                what: format!("{b} must be larger than ring_inner_mm = {a}"),
+            });
         }
     }
     Ok(Manifest {

@@ -38,6 +38,8 @@ const ALLOC_PER_BYTE: usize = 32;
 const ALLOC_SLACK: usize = 64 << 20;
 /// A single allocation request above this is refused (the process then aborts).
 const HARD_CAP: usize = 4 << 30;
+/// Peak-allocation bound of the structured readers (bytes): 320 MiB.
+const STRUCTURED_ALLOC_BOUND: usize = 320 << 20;
 const SLOW: Duration = Duration::from_secs(1);
 
 static LIVE: AtomicUsize = AtomicUsize::new(0);
@@ -126,9 +128,18 @@ enum Reader {
     Detect,
     Path,
     Recipe,
+    /// Structured: a valid recipe with 1 to 4 numbers replaced by extreme values.
+    RecipeX,
+    /// Structured: a generated path log (2 to 400 rows) with extreme coordinates and times,
+    /// read and then re-timed (`apply_limits`) and extent-checked.
+    PathX,
+    /// Structured: a spot manifest with extreme numbers.
+    ManifestX,
+    /// Structured: a dwell case with extreme numbers.
+    DwellX,
 }
 
-const ALL: [Reader; 9] = [
+const ALL: [Reader; 13] = [
     Reader::Dat,
     Reader::Asc,
     Reader::Xyz,
@@ -138,6 +149,10 @@ const ALL: [Reader; 9] = [
     Reader::Detect,
     Reader::Path,
     Reader::Recipe,
+    Reader::RecipeX,
+    Reader::PathX,
+    Reader::ManifestX,
+    Reader::DwellX,
 ];
 
 impl Reader {
@@ -152,13 +167,32 @@ impl Reader {
             Reader::Detect => "detect",
             Reader::Path => "path",
             Reader::Recipe => "recipe",
+            Reader::RecipeX => "recipe-x",
+            Reader::PathX => "path-x",
+            Reader::ManifestX => "manifest-x",
+            Reader::DwellX => "dwell-x",
         }
     }
 
     fn is_text(self) -> bool {
         matches!(
             self,
-            Reader::Asc | Reader::Csv | Reader::Path | Reader::Recipe
+            Reader::Asc
+                | Reader::Csv
+                | Reader::Path
+                | Reader::Recipe
+                | Reader::RecipeX
+                | Reader::PathX
+                | Reader::ManifestX
+                | Reader::DwellX
+        )
+    }
+
+    /// Whether inputs are generated with extreme numbers rather than byte mutations.
+    fn is_structured(self) -> bool {
+        matches!(
+            self,
+            Reader::RecipeX | Reader::PathX | Reader::ManifestX | Reader::DwellX
         )
     }
 
@@ -190,10 +224,39 @@ impl Reader {
                     return Err("BUG: non-finite value accepted".into());
                 }
             }
-            Reader::Recipe => {
+            Reader::Recipe | Reader::RecipeX => {
                 let text = String::from_utf8_lossy(bytes);
                 bonnetlab_process::Recipe::parse(&text, Path::new("/nonexistent/recipe.toml"))
                     .map_err(|e| e.to_string())?;
+            }
+            Reader::PathX => {
+                use bonnetlab_process::path::kinematics::{apply_limits, Limits};
+                let name = Path::new("path.csv");
+                let p = bonnetlab_process::path::log::read_path_from(bytes, name)
+                    .map_err(|e| e.to_string())?;
+                bonnetlab_process::path::log::check_extent(
+                    &p,
+                    name,
+                    (0.0, 100.0),
+                    (0.0, 100.0),
+                    10.0,
+                )
+                .map_err(|e| e.to_string())
+                .and_then(|()| apply_limits(&p, &Limits::default(), 0.5).map_err(|e| e.to_string()))
+                .map(|_| ())?;
+            }
+            Reader::ManifestX => {
+                let text = String::from_utf8_lossy(bytes);
+                bonnetlab_spots::manifest::parse_manifest(Path::new("/nonexistent/m.toml"), &text)
+                    .map_err(|e| e.to_string())?;
+            }
+            Reader::DwellX => {
+                let text = String::from_utf8_lossy(bytes);
+                bonnetlab_process::dwell::case::DwellCase::parse(
+                    &text,
+                    Path::new("/nonexistent/case.toml"),
+                )
+                .map_err(|e| e.to_string())?;
             }
         }
         Ok(())
@@ -299,6 +362,19 @@ const RECIPE_MODEL: &str = "[measurement]\nbefore = \"b.csv\"\nafter = \"a.csv\"
 model = { kind = \"gaussian\", sigma_mm = 1.0, peak_rate_nm_per_s = 10.0, diameter_mm = 10.0 }\n\
 [path]\nlog = \"p.csv\"\n";
 
+const SPOT_MANIFEST: &str = "[defaults]\ndwell_s = 120.0\nprecession_deg = 20.0\n\
+spindle_rpm = 500.0\ninner_pressure_mpa = 0.25\nring_inner_mm = 8.0\nring_outer_mm = 11.0\n\n\
+[[spot]]\nfile = \"a.dat\"\nbonnet = \"original\"\noffset_mm = 0.2\n\n\
+[[spot]]\nfile = \"b.dat\"\nbonnet = \"suppression\"\noffset_mm = 0.4\ndwell_s = 60.0\n";
+
+const SPOT_MANIFEST_CSV: &str = "file,bonnet,dwell_s,precession_deg,offset_mm,spindle_rpm,\
+inner_pressure_mpa\na.dat,original,120,20,0.2,500,0.25\nb.dat,suppression,120,20,0.4,500,0.25\n";
+
+const DWELL_CASE: &str = "surface = \"case.dat\"\npixel_mm = 0.361515\n\n[tif]\n\
+kind = \"gaussian\"\nsigma_mm = 1.0\ndiameter_mm = 10.0\npeak_rate_nm_per_s = 10.0\n\n\
+[clear_aperture]\nrows = [19, 62]\ncols = [31, 558]\nx_mm = [11.206965, 201.363855]\n\
+y_mm = [6.868785, 22.052415]\n";
+
 /// Seeds per reader: (bytes, weight). Large real files get a small weight: they are slow.
 fn seeds(r: Reader) -> Vec<(Vec<u8>, u32)> {
     let small = [
@@ -363,10 +439,17 @@ fn seeds(r: Reader) -> Vec<(Vec<u8>, u32)> {
                 50,
             ),
         ],
-        Reader::Recipe => vec![
+        Reader::Recipe | Reader::RecipeX => vec![
             (RECIPE.as_bytes().to_vec(), 100),
             (RECIPE_MODEL.as_bytes().to_vec(), 50),
         ],
+        // Generated per input (mutate::extreme_path_log); the seed is unused.
+        Reader::PathX => vec![(Vec::new(), 1)],
+        Reader::ManifestX => vec![
+            (SPOT_MANIFEST.as_bytes().to_vec(), 100),
+            (SPOT_MANIFEST_CSV.as_bytes().to_vec(), 50),
+        ],
+        Reader::DwellX => vec![(DWELL_CASE.as_bytes().to_vec(), 100)],
     };
     out
 }
@@ -437,7 +520,13 @@ fn input_for(r: Reader, seeds: &[(Vec<u8>, u32)], total_w: u64, seed: u64, iter:
             break;
         }
     }
-    mutate(r, &mut data, &mut rng);
+    match r {
+        Reader::RecipeX | Reader::ManifestX | Reader::DwellX => {
+            mutate::extreme_numbers(&mut data, &mut rng)
+        }
+        Reader::PathX => data = mutate::extreme_path_log(&mut rng),
+        _ => mutate(r, &mut data, &mut rng),
+    }
     data
 }
 
@@ -504,7 +593,14 @@ fn fuzz(r: Reader, iterations: u64, seed: u64, out: &Path, replay: Option<u64>) 
                 &format!("{dt:?} for {} bytes", data.len()),
             );
         }
-        if peak > ALLOC_PER_BYTE * data.len() + ALLOC_SLACK {
+        // A structured input's size does not bound its work: a 400-row path log may re-time to
+        // the documented 4e6-point limit (about 220 MB). Their bound is that, plus the slack.
+        let bound = if r.is_structured() {
+            STRUCTURED_ALLOC_BOUND
+        } else {
+            ALLOC_PER_BYTE * data.len() + ALLOC_SLACK
+        };
+        if peak > bound {
             t.over_alloc += 1;
             save(
                 out,

@@ -151,3 +151,92 @@ pub(super) fn mutate(r: Reader, data: &mut Vec<u8>, rng: &mut Rng) {
         }
     }
 }
+
+/// Extreme numbers for the structured fuzzers: huge, tiny, subnormal, signed zero, integers past
+/// u64 / u32, and the non-finite spellings TOML and CSV accept.
+const EXTREME: [&str; 22] = [
+    "1e300",
+    "-1e300",
+    "1e-300",
+    "-1e-300",
+    "1e308",
+    "-1e308",
+    "1.7976931348623157e308",
+    "5e-324",
+    "0",
+    "-0.0",
+    "-1",
+    "1e15",
+    "1e12",
+    "-1e12",
+    "1e7",
+    "18446744073709551615",
+    "4294967296",
+    "9223372036854775807",
+    "nan",
+    "inf",
+    "-inf",
+    "0.5",
+];
+
+fn extreme(rng: &mut Rng) -> &'static str {
+    EXTREME[rng.below(EXTREME.len())]
+}
+
+/// Replaces 1 to 4 numeric tokens of a text (TOML, CSV) by extreme values, keeping the rest of
+/// its structure, so the input reaches validation rather than failing to parse.
+pub fn extreme_numbers(data: &mut Vec<u8>, rng: &mut Rng) {
+    for _ in 0..1 + rng.below(4) {
+        let len = data.len();
+        let starts: Vec<usize> = (0..len)
+            .filter(|&i| {
+                (data[i].is_ascii_digit() || data[i] == b'-')
+                    && (i == 0 || !(data[i - 1].is_ascii_alphanumeric() || data[i - 1] == b'.'))
+            })
+            .collect();
+        if starts.is_empty() {
+            return;
+        }
+        let a = starts[rng.below(starts.len())];
+        let mut b = a + 1;
+        while b < len
+            && (data[b].is_ascii_digit() || matches!(data[b], b'.' | b'e' | b'E' | b'-' | b'+'))
+        {
+            b += 1;
+        }
+        data.splice(a..b, extreme(rng).bytes());
+    }
+}
+
+/// A path log of 2 to 400 rows: ordinary raster-like samples, some coordinates and time steps
+/// replaced by extreme values (so the readers' bounds and the re-timing's size check are hit).
+pub fn extreme_path_log(rng: &mut Rng) -> Vec<u8> {
+    let n = 2 + rng.below(399);
+    let p_extreme = [0.0, 0.01, 0.1, 0.5][rng.below(4)];
+    let dt = ["0.2", "1e7", "1e-9", "1000", "3e6"][rng.below(5)];
+    let dt: f64 = dt.parse().unwrap_or(0.2);
+    let mut s = String::from("t_s,x_mm,y_mm\n");
+    let mut t = 0.0f64;
+    for k in 0..n {
+        let line = k / 20;
+        let x = if line % 2 == 0 {
+            (k % 20) as f64 * 5.0
+        } else {
+            (19 - k % 20) as f64 * 5.0
+        };
+        let y = line as f64 * 2.0;
+        let field = |v: f64, rng: &mut Rng| {
+            if rng.uniform() < p_extreme {
+                extreme(rng).to_string()
+            } else {
+                format!("{v}")
+            }
+        };
+        let ts = field(t, rng);
+        let xs = field(x, rng);
+        let ys = field(y, rng);
+        s.push_str(&format!("{ts},{xs},{ys}\n"));
+        t += dt;
+    }
+    s.into_bytes()
+}

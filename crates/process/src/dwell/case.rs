@@ -142,7 +142,12 @@ pub struct CaseProblem {
 
 impl DwellCase {
     pub fn load(path: &Path) -> Result<DwellCase, ProcessError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ProcessError::Io {
+        let text = bonnetlab_io::input::read_text(
+            path,
+            bonnetlab_io::input::TEXT_LIMIT,
+            "a dwell case (TOML)",
+        )
+        .map_err(|e| ProcessError::Io {
             file: path.to_path_buf(),
             what: e.to_string(),
         })?;

@@ -59,6 +59,9 @@ impl Limits {
     }
 }
 
+/// Most points a re-timed path may have: seven `f64` vectors of this length are about 220 MB.
+pub const MAX_RETIME_POINTS: usize = 4_000_000;
+
 /// Re-times `path` under `limits`. Segments are first split to at most `ds_max_mm` so the speed
 /// is nearly constant within each; positions are kept, times change. Zero-length segments
 /// (dwelling in place) keep their duration.
@@ -75,22 +78,40 @@ pub fn apply_limits(
     if n < 2 {
         return Ok(path.clone());
     }
+    // The size is known before anything is allocated: refuse a path that would need too many
+    // points (a log with coordinates of 1e12 mm asks for 1e14) with the numbers that say why.
+    let mut length = 0.0f64;
+    let mut pieces = 1.0f64;
+    for k in 0..n - 1 {
+        let len = (path.x_mm[k + 1] - path.x_mm[k]).hypot(path.y_mm[k + 1] - path.y_mm[k]);
+        length += len;
+        pieces += if len.is_finite() {
+            (len / ds_max_mm).ceil().max(1.0)
+        } else {
+            f64::INFINITY
+        };
+    }
+    if pieces.is_nan() || pieces > MAX_RETIME_POINTS as f64 {
+        return Err(ProcessError::invalid(format!(
+            "the path is {length:.4e} mm long: re-timing it in {ds_max_mm} mm steps needs \
+             {pieces:.3e} points, over the limit of {MAX_RETIME_POINTS} (check the path log's \
+             coordinates and units)"
+        )));
+    }
+    let cap = pieces as usize;
     // Split into short pieces, carrying each piece's commanded speed and in-place dwell.
-    let mut xs = vec![path.x_mm[0]];
-    let mut ys = vec![path.y_mm[0]];
-    let mut cmd_v = Vec::new();
-    let mut still_dt = Vec::new();
+    let mut xs = Vec::with_capacity(cap);
+    let mut ys = Vec::with_capacity(cap);
+    xs.push(path.x_mm[0]);
+    ys.push(path.y_mm[0]);
+    let mut cmd_v = Vec::with_capacity(cap);
+    let mut still_dt = Vec::with_capacity(cap);
     for k in 0..n - 1 {
         let (x0, y0) = (path.x_mm[k], path.y_mm[k]);
         let (dx, dy) = (path.x_mm[k + 1] - x0, path.y_mm[k + 1] - y0);
         let len = dx.hypot(dy);
         let dt = path.t_s[k + 1] - path.t_s[k];
         let m = super::substeps(len, 0.0, ds_max_mm, 0.0);
-        if xs.len() + m > 100_000_000 {
-            return Err(ProcessError::invalid(
-                "path too long to re-time at this resolution",
-            ));
-        }
         for s in 1..=m {
             let f = s as f64 / m as f64;
             xs.push(x0 + f * dx);
@@ -280,5 +301,24 @@ mod tests {
         };
         let (_, real) = dwell_raster(&spec, &d, &grid, &slow, 0.1).unwrap();
         assert!(real.duration_s() > cmd.duration_s() + 0.5);
+    }
+
+    #[test]
+    fn huge_coordinates_are_refused_before_allocating() {
+        let p = PathLog::new(
+            vec![0.0, 1.0, 2.0],
+            vec![-1e12, 1e12, -1e12],
+            vec![0.0, 0.0, 1e12],
+        )
+        .unwrap();
+        let e = apply_limits(&p, &Limits::default(), 0.1)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("over the limit") && e.contains("mm long"), "{e}");
+        let p = PathLog::new(vec![0.0, 1.0], vec![-1e308, 1e308], vec![0.0, 0.0]).unwrap();
+        let e = apply_limits(&p, &Limits::default(), 0.1)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("over the limit"), "{e}");
     }
 }

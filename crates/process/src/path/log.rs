@@ -7,22 +7,51 @@ use std::path::Path;
 use super::PathLog;
 use crate::error::ProcessError;
 
-/// Reads a path log CSV.
+/// Largest |x| or |y| accepted (mm): 100 m, beyond any polishing cell's workspace. A log with
+/// larger coordinates has the wrong units or is corrupt; it is refused at its line, before any
+/// simulation sizes a grid or a re-timed path from it.
+pub const MAX_ABS_COORD_MM: f64 = 1.0e5;
+/// Largest |t_s| accepted (s): about 3 years.
+pub const MAX_ABS_TIME_S: f64 = 1.0e8;
+
+/// Longest header line accepted (bytes): a header names a handful of columns.
+pub const MAX_HEADER_BYTES: usize = 64 * 1024;
+
+/// Reads a path log CSV: a regular file (a FIFO or `/dev/zero` is refused before it is opened)
+/// of at most `bonnetlab_io::input::LOG_LIMIT` bytes.
 pub fn read_path_csv(path: &Path) -> Result<PathLog, ProcessError> {
-    let file = std::fs::File::open(path).map_err(|e| ProcessError::Io {
-        file: path.to_path_buf(),
-        what: e.to_string(),
-    })?;
-    read_path_from(file, path)
+    let bytes =
+        bonnetlab_io::input::read_bounded(path, bonnetlab_io::input::LOG_LIMIT).map_err(|e| {
+            ProcessError::Io {
+                file: path.to_path_buf(),
+                what: format!("cannot read the path log: {e}"),
+            }
+        })?;
+    read_path_from(&bytes[..], path)
 }
 
-/// Reads a path log from any reader; `name` is used in errors.
+/// Reads a path log from any reader; `name` is used in errors. The header line is read first,
+/// with a bound ([`MAX_HEADER_BYTES`]), so an endless or binary stream is refused at once.
 pub fn read_path_from(r: impl std::io::Read, name: &Path) -> Result<PathLog, ProcessError> {
+    use std::io::{BufRead, Read};
     let err = |line: usize, what: String| ProcessError::PathLog {
         file: name.to_path_buf(),
         line,
         what,
     };
+    let mut r = std::io::BufReader::new(r);
+    let mut header = Vec::new();
+    (&mut r)
+        .take(MAX_HEADER_BYTES as u64 + 1)
+        .read_until(b'\n', &mut header)
+        .map_err(|e| err(1, format!("cannot read the header: {e}")))?;
+    if header.len() > MAX_HEADER_BYTES {
+        return Err(err(
+            1,
+            format!("the header line is longer than {MAX_HEADER_BYTES} bytes: not a path log"),
+        ));
+    }
+    let r = std::io::Cursor::new(header).chain(r);
     let mut rdr = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
         .flexible(true)
@@ -68,6 +97,18 @@ pub fn read_path_from(r: impl std::io::Read, name: &Path) -> Result<PathLog, Pro
             if !x.is_finite() {
                 return Err(err(line, format!("{name} is not finite: '{s}'")));
             }
+            let bound = if name == "t_s" {
+                MAX_ABS_TIME_S
+            } else {
+                MAX_ABS_COORD_MM
+            };
+            if x.abs() > bound {
+                let unit = if name == "t_s" { "s" } else { "mm" };
+                return Err(err(
+                    line,
+                    format!("{name} = {x:e} is outside +-{bound:e} {unit} (wrong units?)"),
+                ));
+            }
             *slot = x;
         }
         if let Some(&last) = p.t_s.last() {
@@ -86,6 +127,38 @@ pub fn read_path_from(r: impl std::io::Read, name: &Path) -> Result<PathLog, Pro
         return Err(err(1, "a path log needs at least two samples".into()));
     }
     Ok(p)
+}
+
+/// Checks that every sample lies within `x_mm` x `y_mm` (the part) widened by `margin_mm` (the
+/// spot radius): a sample further out cannot touch the part, so it is an error naming the log and
+/// the sample rather than a grid sized to reach it. For the simulation pipelines.
+pub fn check_extent(
+    p: &PathLog,
+    name: &Path,
+    x_mm: (f64, f64),
+    y_mm: (f64, f64),
+    margin_mm: f64,
+) -> Result<(), ProcessError> {
+    let m = margin_mm.max(0.0);
+    for k in 0..p.len() {
+        let (x, y) = (p.x_mm[k], p.y_mm[k]);
+        if x < x_mm.0 - m || x > x_mm.1 + m || y < y_mm.0 - m || y > y_mm.1 + m {
+            return Err(ProcessError::PathLog {
+                file: name.to_path_buf(),
+                line: k + 2,
+                what: format!(
+                    "sample {} at ({x:.6e}, {y:.6e}) mm is outside the part [{}, {}] x [{}, {}] mm \
+                     plus the spot ({m} mm)",
+                    k + 1,
+                    x_mm.0,
+                    x_mm.1,
+                    y_mm.0,
+                    y_mm.1
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Writes a path log as CSV text (`t_s,x_mm,y_mm`), full precision.
@@ -134,5 +207,50 @@ mod tests {
         assert!(e.contains("line 1") && e.contains("t_s"), "{e}");
         let e = read("t_s,x_mm,y_mm\n0,0\n").unwrap_err().to_string();
         assert!(e.contains("line 2"), "{e}");
+    }
+
+    #[test]
+    fn implausible_coordinates_and_long_headers_are_refused_at_their_line() {
+        let e = read("t_s,x_mm,y_mm\n0,0,0\n1,1e12,0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 3") && e.contains("x_mm = 1e12"), "{e}");
+        let e = read("t_s,x_mm,y_mm\n0,0,0\n1e9,1,0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 3") && e.contains("t_s"), "{e}");
+        let long = format!(
+            "t_s,x_mm,y_mm,{}\n0,0,0\n1,0,0\n",
+            "a".repeat(MAX_HEADER_BYTES)
+        );
+        let e = read(&long).unwrap_err().to_string();
+        assert!(
+            e.contains("line 1") && e.contains("header line is longer"),
+            "{e}"
+        );
+        let zeros = vec![0u8; 3 * MAX_HEADER_BYTES];
+        let e = read_path_from(&zeros[..], Path::new("p.csv"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 1"), "{e}");
+    }
+
+    #[test]
+    fn extent_check_names_the_first_sample_outside() {
+        let p = read("t_s,x_mm,y_mm\n0,0,0\n1,50,0\n2,80,0\n").unwrap();
+        check_extent(&p, Path::new("p.csv"), (0.0, 60.0), (0.0, 60.0), 25.0).unwrap();
+        let e = check_extent(&p, Path::new("p.csv"), (0.0, 60.0), (0.0, 60.0), 10.0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 4") && e.contains("sample 3"), "{e}");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn special_files_are_refused_without_blocking() {
+        let e = read_path_csv(Path::new("/dev/zero"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("character device"), "{e}");
     }
 }

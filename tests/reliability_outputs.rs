@@ -1,0 +1,366 @@
+//! Output safety (issues 17 and 18), one test per defect, each failing on the old behaviour:
+//! checked stdout (`/dev/full` is exit 1 with one line, a closed pipe ends quietly), `--json -`
+//! is stdout in every command, an unwritable output is exit 2 in every command, the file is named
+//! once, special files / symbolic links / inputs are never replaced, and a multi-file report is
+//! published as a set under a lock (stale temporary files of killed runs removed).
+
+use std::os::unix::fs::FileTypeExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
+}
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A dwell case from ../shared; fails (never skips) when the shared data is missing.
+fn dwell_case() -> PathBuf {
+    let p = repo().join("../shared/data/dwell/rifta_case_a.toml");
+    let p = if p.exists() {
+        p
+    } else {
+        repo().join("../../shared/data/dwell/rifta_case_a.toml")
+    };
+    assert!(
+        p.exists(),
+        "missing shared data: {} (clone ../shared beside the repository)",
+        p.display()
+    );
+    p
+}
+
+fn sample_map() -> PathBuf {
+    repo().join("samples/original/before_1.dat")
+}
+
+fn full() -> Stdio {
+    Stdio::from(
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap(),
+    )
+}
+
+/// A pipe whose reading end is already closed: any write gets EPIPE.
+fn closed_pipe() -> Stdio {
+    let (r, w) = std::io::pipe().unwrap();
+    drop(r);
+    Stdio::from(w)
+}
+
+fn run(mut c: Command, stdout: Stdio) -> Output {
+    c.stdout(stdout).stderr(Stdio::piped()).output().unwrap()
+}
+
+fn err(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn one_line(o: &Output, needle: &str) {
+    let e = err(o);
+    assert_eq!(e.lines().count(), 1, "not one line: {e}");
+    assert!(e.contains(needle), "'{needle}' not in: {e}");
+    assert!(!e.contains("panicked"), "{e}");
+}
+
+#[test]
+fn full_stdout_is_exit_1_with_one_line_in_every_command() {
+    let case = dwell_case();
+    let mut cmds: Vec<(&str, Command)> = Vec::new();
+    let mut c = bin();
+    c.args(["psd", "--json"]).arg(sample_map());
+    cmds.push(("psd --json", c));
+    let mut c = bin();
+    c.args(["stats", "--json"]).arg(sample_map());
+    cmds.push(("stats --json", c));
+    let mut c = bin();
+    c.args(["vibration", "--json", "-"]);
+    cmds.push(("vibration --json -", c));
+    let mut c = bin();
+    c.arg("vibration");
+    cmds.push(("vibration", c));
+    let mut c = bin();
+    c.arg("batch").arg(sample_map());
+    cmds.push(("batch", c));
+    let mut c = bin();
+    c.arg("dwell").arg(&case);
+    cmds.push(("dwell", c));
+    for (name, c) in cmds {
+        let o = run(c, full());
+        assert_eq!(o.status.code(), Some(1), "{name}: {}", err(&o));
+        one_line(&o, "stdout: cannot write: No space left on device");
+    }
+}
+
+#[test]
+fn closed_pipe_ends_quietly_without_a_panic() {
+    let mut c = bin();
+    c.arg("dwell").arg(dwell_case());
+    let o = run(c, closed_pipe());
+    assert_eq!(o.status.code(), Some(0), "{}", err(&o));
+    assert!(err(&o).is_empty(), "{}", err(&o));
+    for args in [&["vibration", "--json", "-"][..], &["psd", "--json"][..]] {
+        let mut c = bin();
+        c.args(args);
+        if args[0] == "psd" {
+            c.arg(sample_map());
+        }
+        let o = run(c, closed_pipe());
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {}", err(&o));
+        assert!(err(&o).is_empty(), "{args:?}: {}", err(&o));
+    }
+}
+
+#[test]
+fn json_dash_is_stdout_in_dwell_and_vibration() {
+    let d = tempfile::tempdir().unwrap();
+    for args in [
+        vec!["dwell".to_string(), dwell_case().display().to_string()],
+        vec!["vibration".to_string()],
+    ] {
+        let o = bin()
+            .args(&args)
+            .args(["--json", "-"])
+            .current_dir(d.path())
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{args:?}: {}", err(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON on stdout");
+        assert!(v.is_object() || v.is_array());
+        assert!(
+            !d.path().join("-").exists(),
+            "{args:?} created a file named -"
+        );
+    }
+}
+
+#[test]
+fn unwritable_output_is_exit_2_naming_the_file_once_everywhere() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("no/such/dir/out.csv");
+    let o = bin()
+        .arg("psd")
+        .arg(sample_map())
+        .arg("--csv")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "psd: {}", err(&o));
+    one_line(&o, "out.csv: cannot write");
+    assert_eq!(err(&o).matches("out.csv").count(), 1, "{}", err(&o));
+    let json = d.path().join("no/such/dir/out.json");
+    for args in [
+        vec!["vibration".to_string()],
+        vec!["dwell".to_string(), dwell_case().display().to_string()],
+    ] {
+        let o = bin().args(&args).arg("--json").arg(&json).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {}", err(&o));
+        one_line(&o, "out.json: cannot write");
+        assert_eq!(err(&o).matches("out.json").count(), 1, "{}", err(&o));
+    }
+}
+
+#[test]
+fn a_map_given_as_dwell_case_is_named_as_not_text() {
+    let o = bin().arg("dwell").arg(sample_map()).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    one_line(&o, "before_1.dat: is not a text file");
+    assert!(!err(&o).contains("stream did not contain valid UTF-8"));
+}
+
+#[test]
+fn fifo_outputs_are_refused_and_kept() {
+    let d = tempfile::tempdir().unwrap();
+    let fifo = d.path().join("out.fifo");
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let o = bin()
+        .arg("psd")
+        .arg(sample_map())
+        .arg("--csv")
+        .arg(&fifo)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    one_line(&o, "FIFO");
+    let o = bin()
+        .args(["vibration", "--json"])
+        .arg(&fifo)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    assert!(std::fs::symlink_metadata(&fifo)
+        .unwrap()
+        .file_type()
+        .is_fifo());
+}
+
+#[test]
+fn an_input_map_is_not_overwritten_by_psd_csv() {
+    let d = tempfile::tempdir().unwrap();
+    let map = d.path().join("map.csv");
+    let mut text = String::new();
+    for i in 0..16 {
+        let row: Vec<String> = (0..16)
+            .map(|j| format!("{}", (i * j % 7) as f64 - 3.0))
+            .collect();
+        text.push_str(&row.join(","));
+        text.push('\n');
+    }
+    std::fs::write(&map, &text).unwrap();
+    let before = std::fs::read(&map).unwrap();
+    let o = bin()
+        .arg("psd")
+        .arg(&map)
+        .args(["--pixel-mm", "1"])
+        .arg("--csv")
+        .arg(&map)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    one_line(&o, "input of this command");
+    assert_eq!(std::fs::read(&map).unwrap(), before);
+}
+
+#[test]
+fn spots_does_not_overwrite_its_manifest_in_the_output_directory() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().join("sweep");
+    std::fs::create_dir(&dir).unwrap();
+    let src = repo().join("samples/spots");
+    let mut csv = String::from(
+        "file,bonnet,dwell_s,precession_deg,offset_mm,spindle_rpm,inner_pressure_mpa\n",
+    );
+    for (k, off) in ["0.2", "0.4", "0.6"].iter().enumerate() {
+        let name = format!("original_offset_{off}.dat");
+        std::fs::copy(src.join(&name), dir.join(&name)).unwrap();
+        csv.push_str(&format!("{name},original,120,20,{off},500,0.25\n"));
+        let _ = k;
+    }
+    let manifest = dir.join("spots.csv");
+    std::fs::write(&manifest, &csv).unwrap();
+    let o = bin()
+        .arg("spots")
+        .arg(&manifest)
+        .arg("--out")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    one_line(&o, "input of this command");
+    assert_eq!(std::fs::read_to_string(&manifest).unwrap(), csv);
+    // Nothing else was published either (the set is all or nothing).
+    assert!(!dir.join("report.json").exists());
+    assert!(!dir.join("report.html").exists());
+}
+
+#[test]
+fn a_symlinked_output_is_written_through_and_kept() {
+    let d = tempfile::tempdir().unwrap();
+    let target = d.path().join("real.csv");
+    std::fs::write(&target, "old").unwrap();
+    let link = d.path().join("link.csv");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let o = bin()
+        .arg("psd")
+        .arg(sample_map())
+        .arg("--csv")
+        .arg(&link)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", err(&o));
+    assert!(std::fs::symlink_metadata(&link)
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    assert!(std::fs::read_to_string(&target)
+        .unwrap()
+        .starts_with("axis,"));
+}
+
+fn compare(dir: &Path, name: &str) -> Output {
+    let s = repo().join("samples/original");
+    bin()
+        .arg("compare")
+        .arg("--run")
+        .arg(format!(
+            "{name}={},{}",
+            s.join("before_1.dat").display(),
+            s.join("after_1.dat").display()
+        ))
+        .arg("--out")
+        .arg(dir)
+        .output()
+        .unwrap()
+}
+
+fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn compare_failing_part_way_leaves_the_previous_report_whole() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().join("out");
+    let o = compare(&dir, "first");
+    assert!(o.status.success(), "{}", err(&o));
+    let json = std::fs::read(dir.join("report.json")).unwrap();
+    let html = std::fs::read(dir.join("report.html")).unwrap();
+    let names = listing(&dir);
+    // A 300-character run name makes a CSV name too long for the file system.
+    let o = compare(&dir, &"r".repeat(300));
+    assert_ne!(o.status.code(), Some(0), "{}", err(&o));
+    assert_eq!(err(&o).lines().count(), 1, "{}", err(&o));
+    assert_eq!(std::fs::read(dir.join("report.json")).unwrap(), json);
+    assert_eq!(std::fs::read(dir.join("report.html")).unwrap(), html);
+    assert_eq!(listing(&dir), names, "no staging or temporary file left");
+}
+
+#[test]
+fn a_second_writer_to_one_out_directory_is_refused_and_stale_temps_removed() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().join("out");
+    std::fs::create_dir(&dir).unwrap();
+    // A live run (this test process) holds the lock.
+    let lock = dir.join(".bonnetlab.lock");
+    std::fs::write(&lock, format!("{}\n", std::process::id())).unwrap();
+    let o = compare(&dir, "a");
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    one_line(&o, "another bonnetlab run");
+    assert!(!dir.join("report.json").exists());
+    // A killed run's lock and temporary files (pid above Linux's pid range) are stale.
+    std::fs::write(&lock, "4194305\n").unwrap();
+    let stale = dir.join(".report.json.tmp-4194305-3");
+    std::fs::write(&stale, "half").unwrap();
+    let staging = dir.join(".bonnetlab-staging-4194305-0");
+    std::fs::create_dir(&staging).unwrap();
+    let o = compare(&dir, "a");
+    assert!(o.status.success(), "{}", err(&o));
+    assert!(!stale.exists() && !staging.exists() && !lock.exists());
+    assert!(dir.join("report.json").exists() && dir.join("report.html").exists());
+}
+
+#[test]
+fn usage_errors_are_one_line() {
+    let o = bin().args(["psd", "--no-such-flag", "x"]).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    one_line(&o, "--no-such-flag");
+    let o = bin()
+        .args(["psd", "--harmonics", "18446744073709551615", "x"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    one_line(&o, "between 0 and 1000");
+}
