@@ -551,18 +551,15 @@ fn fit_text<DB: DrawingBackend>(
         return t.to_string();
     }
     let mut words: Vec<String> = t.split(' ').map(str::to_string).collect();
-    loop {
-        // The longest word that still has a folder to drop.
-        let Some(k) = (0..words.len())
-            .filter(|&k| {
-                let w = words[k].trim_start_matches(|c: char| !c.is_alphanumeric() && c != '/');
-                let w = w.trim_start_matches("…/");
-                w.contains('/') && w.find('/').is_some_and(|i| i + 1 < w.len())
-            })
-            .max_by_key(|&k| words[k].chars().count())
-        else {
-            break;
-        };
+    // Each round drops a folder of the longest word that still has one.
+    while let Some(k) = (0..words.len())
+        .filter(|&k| {
+            let w = words[k].trim_start_matches(|c: char| !c.is_alphanumeric() && c != '/');
+            let w = w.trim_start_matches("…/");
+            w.contains('/') && w.find('/').is_some_and(|i| i + 1 < w.len())
+        })
+        .max_by_key(|&k| words[k].chars().count())
+    {
         // Punctuation before the path (an opening bracket, a quote) stays.
         let lead: String = words[k]
             .chars()
@@ -874,8 +871,7 @@ mod tests {
         let (bx0, bx1) = (cols[0], *cols.last().unwrap());
         let (by0, by1) = (rows[0], *rows.last().unwrap());
         assert!(bx1 > bx0 && by1 > by0, "no legend box found");
-        for k in 0..3 {
-            let (r, g, b) = PALETTE[k];
+        for (k, &(r, g, b)) in PALETTE.iter().enumerate().take(3) {
             let mut outside_right = 0;
             let mut in_box = Vec::new();
             for (x, y, p) in img.enumerate_pixels() {
