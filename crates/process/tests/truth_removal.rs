@@ -32,6 +32,19 @@ const SIDE_MM: f64 = 20.0;
 /// Feed along the lines, mm/s.
 const SPEED: f64 = 10.0;
 
+/// The precessing bonnet of the suite: R 20 mm, h 0.2 mm, 20 deg, four steps, Hertz pressure.
+fn bonnet_params() -> BonnetTifParams {
+    BonnetTifParams {
+        radius_mm: 20.0,
+        offset_mm: 0.2,
+        precession_deg: 20.0,
+        spindle_rpm: 1000.0,
+        pressure: PressureProfile::Hertz,
+        scale: RateScale::PeakNmPerS(10.0),
+        precession_steps: 4,
+    }
+}
+
 #[derive(Clone)]
 enum Truth {
     Gaussian(GaussianTif),
@@ -45,15 +58,7 @@ impl Truth {
     }
 
     fn bonnet() -> Truth {
-        let p = BonnetTifParams {
-            radius_mm: 20.0,
-            offset_mm: 0.2,
-            precession_deg: 20.0,
-            spindle_rpm: 1000.0,
-            pressure: PressureProfile::Hertz,
-            scale: RateScale::PeakNmPerS(10.0),
-            precession_steps: 4,
-        };
+        let p = bonnet_params();
         let a = p.contact_radius_mm();
         Truth::Bonnet(Box::new(BonnetTif::new(&p).unwrap()), a)
     }
@@ -269,16 +274,7 @@ fn run_case(
         None => match truth {
             Truth::Gaussian(g) => ToolModel::from_source(&TifSource::Gaussian(*g), None, px, px),
             Truth::Bonnet(..) => {
-                let p = BonnetTifParams {
-                    radius_mm: 20.0,
-                    offset_mm: 0.2,
-                    precession_deg: 20.0,
-                    spindle_rpm: 1000.0,
-                    pressure: PressureProfile::Hertz,
-                    scale: RateScale::PeakNmPerS(10.0),
-                    precession_steps: 4,
-                };
-                ToolModel::from_source(&TifSource::Bonnet(p), None, px, px)
+                ToolModel::from_source(&TifSource::Bonnet(bonnet_params()), None, px, px)
             }
         },
         Some(s) => {
