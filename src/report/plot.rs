@@ -551,22 +551,29 @@ fn fit_text<DB: DrawingBackend>(
         return t.to_string();
     }
     let mut words: Vec<String> = t.split(' ').map(str::to_string).collect();
-    // Each round drops a folder of the longest word that still has one.
-    while let Some(k) = (0..words.len())
-        .filter(|&k| {
-            let w = words[k].trim_start_matches(|c: char| !c.is_alphanumeric() && c != '/');
-            let w = w.trim_start_matches("…/");
-            w.contains('/') && w.find('/').is_some_and(|i| i + 1 < w.len())
-        })
-        .max_by_key(|&k| words[k].chars().count())
-    {
-        // Punctuation before the path (an opening bracket, a quote) stays.
-        let lead: String = words[k]
+    // A word as (punctuation before a path, such as an opening bracket, which stays; the path
+    // without a leading `…/`).
+    let split = |w: &str| -> (String, String) {
+        let lead: String = w
             .chars()
             .take_while(|c| !c.is_alphanumeric() && !matches!(c, '/' | '.' | '…' | '~' | '_'))
             .collect();
-        let w = words[k][lead.len()..].trim_start_matches("…/").to_string();
-        let rest = &w[w.find('/').unwrap() + 1..];
+        let rest = w[lead.len()..].trim_start_matches("…/").to_string();
+        (lead, rest)
+    };
+    let droppable = |w: &str| {
+        split(w)
+            .1
+            .find('/')
+            .is_some_and(|i| i + 1 < split(w).1.len())
+    };
+    // Drop the leading folder of the longest word that still has one, until the text fits.
+    while let Some(k) = (0..words.len())
+        .filter(|&k| droppable(&words[k]))
+        .max_by_key(|&k| words[k].chars().count())
+    {
+        let (lead, w) = split(&words[k]);
+        let rest = &w[w.find('/').unwrap_or(0) + 1..];
         words[k] = format!("{lead}…/{rest}");
         let joined = words.join(" ");
         if fits(&joined) {
@@ -981,6 +988,10 @@ mod tests {
             t
         });
         assert!(fitted.starts_with("1-D PSD (…/"), "{fitted}");
+        // A file name too long even without its folders is cut in the middle, never a panic.
+        let long = format!("PSD of /a/{}.dat", "x".repeat(200));
+        let cut = with_root(|root| fit_text(root, &long, TITLE_FONT, 400));
+        assert!(cut.ends_with(".dat") && cut.contains('…'), "{cut}");
         assert!(
             fitted.ends_with("before_1_with_a_long_name.dat, window hann)"),
             "{fitted}"
