@@ -5,6 +5,7 @@
 //! rows = Y = feed, columns = X = scan); heights and removal in nm (removal positive = material
 //! removed); rates in nm/s; dwell in s (per pixel for maps, or s/mm^2 when said).
 
+pub mod channels;
 pub mod dwell;
 pub mod error;
 pub mod fft;

@@ -88,6 +88,34 @@ impl PathLog {
         ))
     }
 
+    /// The same motion with extra samples: every segment cut into equal pieces no longer than
+    /// `max_step_mm` (straight lines at constant speed, so the motion is unchanged). The
+    /// original samples are kept; per-sample quantities of the result (rate weights, path
+    /// perturbations) are then resolved at that spacing.
+    pub fn densified(&self, max_step_mm: f64) -> PathLog {
+        let n = self.len();
+        let mut out = PathLog::default();
+        for k in 0..n {
+            out.t_s.push(self.t_s[k]);
+            out.x_mm.push(self.x_mm[k]);
+            out.y_mm.push(self.y_mm[k]);
+            if k + 1 == n {
+                break;
+            }
+            let (x0, y0) = (self.x_mm[k], self.y_mm[k]);
+            let (ddx, ddy) = (self.x_mm[k + 1] - x0, self.y_mm[k + 1] - y0);
+            let dt = self.t_s[k + 1] - self.t_s[k];
+            let m = substeps(ddx.hypot(ddy), dt, max_step_mm, 0.0);
+            for s in 1..m {
+                let fr = s as f64 / m as f64;
+                out.t_s.push(self.t_s[k] + fr * dt);
+                out.x_mm.push(x0 + fr * ddx);
+                out.y_mm.push(y0 + fr * ddy);
+            }
+        }
+        out
+    }
+
     /// Sub-steps of the path: for every segment, `m` equal pieces no longer than `max_step_mm`
     /// (and no longer than `max_dt_s` in time), each given as (midpoint x, y, duration, segment
     /// index, fraction along the segment at the midpoint). Calls `f` for each.
@@ -150,5 +178,26 @@ mod tests {
         assert!((p.length_mm() - 1.5).abs() < 1e-12);
         assert_eq!(p.position_at(2.5), Some((1.0, 0.25)));
         assert!(PathLog::new(vec![0.0, 0.0], vec![0.0; 2], vec![0.0; 2]).is_err());
+    }
+
+    #[test]
+    fn densified_keeps_the_motion() {
+        let p = PathLog::new(
+            vec![0.0, 2.0, 3.0],
+            vec![0.0, 1.0, 1.0],
+            vec![0.0, 0.0, 0.5],
+        )
+        .unwrap();
+        let d = p.densified(0.1);
+        assert_eq!(d.len(), 10 + 5 + 1);
+        assert!(PathLog::new(d.t_s.clone(), d.x_mm.clone(), d.y_mm.clone()).is_ok());
+        for t in [0.0, 0.37, 1.99, 2.0, 2.5, 3.0] {
+            let (a, b) = (p.position_at(t).unwrap(), d.position_at(t).unwrap());
+            assert!(
+                (a.0 - b.0).abs() < 1e-12 && (a.1 - b.1).abs() < 1e-12,
+                "{t}"
+            );
+        }
+        assert_eq!((d.t_s[10], d.x_mm[10]), (2.0, 1.0));
     }
 }

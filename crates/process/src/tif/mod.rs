@@ -10,6 +10,7 @@
 //! Preston's law) and [`measured`] (a polished spot on a height map).
 
 pub mod bonnet;
+pub mod derived;
 pub mod gaussian;
 pub mod measured;
 pub mod motion;
