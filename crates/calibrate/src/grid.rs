@@ -1,75 +1,10 @@
-//! The map grid (pixel centres at `x0 + j dx`, `y0 + i dy`), bilinear splatting of path
-//! sub-steps into dwell maps on the kernel-extended grid, bilinear sampling of maps at path
+//! Maps on the run's grid (the process crate's [`MapGrid`]): bilinear sampling of maps at path
 //! positions, masked Gaussian smoothing and a signed distance to the part edge.
 
-use bonnetlab_surface::Surface;
 use ndarray::Array2;
 
-use crate::error::CalibrateError;
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MapGrid {
-    pub rows: usize,
-    pub cols: usize,
-    pub dx_mm: f64,
-    pub dy_mm: f64,
-    pub x0_mm: f64,
-    pub y0_mm: f64,
-}
-
-impl MapGrid {
-    pub fn of(s: &Surface) -> Result<Self, CalibrateError> {
-        let (dx, dy) = s.pixel_mm("calibration")?;
-        Ok(MapGrid {
-            rows: s.rows(),
-            cols: s.cols(),
-            dx_mm: dx,
-            dy_mm: dy,
-            x0_mm: s.origin_mm.0,
-            y0_mm: s.origin_mm.1,
-        })
-    }
-
-    pub fn x_mm(&self, j: usize) -> f64 {
-        self.x0_mm + j as f64 * self.dx_mm
-    }
-
-    pub fn y_mm(&self, i: usize) -> f64 {
-        self.y0_mm + i as f64 * self.dy_mm
-    }
-
-    /// Centre of the map (mm): the rotation centre of `registration`.
-    pub fn centre_mm(&self) -> (f64, f64) {
-        (
-            self.x0_mm + 0.5 * (self.cols as f64 - 1.0) * self.dx_mm,
-            self.y0_mm + 0.5 * (self.rows as f64 - 1.0) * self.dy_mm,
-        )
-    }
-}
-
-/// Dwell-like map on the grid extended by (hr, hc): `sum_k w_k` splatted bilinearly at
-/// (x_k, y_k). Samples off the extended grid are dropped (their footprint misses the map).
-pub fn splat(g: &MapGrid, hr: usize, hc: usize, xs: &[f64], ys: &[f64], w: &[f64]) -> Array2<f64> {
-    let (er, ec) = (g.rows + 2 * hr, g.cols + 2 * hc);
-    let mut d = Array2::<f64>::zeros((er, ec));
-    for ((&x, &y), &wk) in xs.iter().zip(ys).zip(w) {
-        if wk == 0.0 {
-            continue;
-        }
-        let fj = (x - g.x0_mm) / g.dx_mm + hc as f64;
-        let fi = (y - g.y0_mm) / g.dy_mm + hr as f64;
-        if !(fi >= 0.0 && fj >= 0.0 && fi < (er - 1) as f64 && fj < (ec - 1) as f64) {
-            continue;
-        }
-        let (i0, j0) = (fi as usize, fj as usize);
-        let (a, b) = (fi - i0 as f64, fj - j0 as f64);
-        d[(i0, j0)] += wk * (1.0 - a) * (1.0 - b);
-        d[(i0, j0 + 1)] += wk * (1.0 - a) * b;
-        d[(i0 + 1, j0)] += wk * a * (1.0 - b);
-        d[(i0 + 1, j0 + 1)] += wk * a * b;
-    }
-    d
-}
+/// The map grid: the process crate's one grid type.
+pub use bonnetlab_process::Grid as MapGrid;
 
 /// Bilinear sample of a (hole-free) map at (x, y) mm, positions clamped to the grid.
 pub fn sample(g: &MapGrid, a: &Array2<f64>, x: f64, y: f64) -> f64 {
@@ -234,28 +169,6 @@ pub fn signed_edge_distance(valid: &Array2<bool>, dx: f64, dy: f64) -> Array2<f6
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn splat_conserves_weight_and_centroid() {
-        let g = MapGrid {
-            rows: 10,
-            cols: 12,
-            dx_mm: 0.5,
-            dy_mm: 0.25,
-            x0_mm: 1.0,
-            y0_mm: -1.0,
-        };
-        let d = splat(&g, 2, 3, &[2.3], &[0.1], &[4.0]);
-        let tot: f64 = d.sum();
-        assert!((tot - 4.0).abs() < 1e-12);
-        let mut cx = 0.0;
-        let mut cy = 0.0;
-        for ((i, j), v) in d.indexed_iter() {
-            cx += v * (1.0 + (j as f64 - 3.0) * 0.5);
-            cy += v * (-1.0 + (i as f64 - 2.0) * 0.25);
-        }
-        assert!((cx / 4.0 - 2.3).abs() < 1e-12 && (cy / 4.0 - 0.1).abs() < 1e-12);
-    }
 
     #[test]
     fn edge_distance_of_a_rectangle_with_a_hole() {

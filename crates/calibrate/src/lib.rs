@@ -2,7 +2,7 @@
 //! with hold-out selection, and a generator of synthetic measured runs.
 
 pub mod error;
-pub mod fftconv;
+
 pub mod grid;
 pub mod path;
 pub mod tif;

@@ -3,13 +3,14 @@
 //! Measured removal `M = before - after(T_reg(x))` on the analysis pixels (the after map resampled
 //! through the registration transform, see `registration`). Predicted removal:
 //!
-//! `P(x) = sum_j c_j * (K_s * D_{g_j})(x) + piston + tilt_x x + tilt_y y`
+//! `P(x) = sum_j c_j * R_s(path_exec, g_j)(x) + piston + tilt_x x + tilt_y y`
 //!
-//! where `D_g` splats `dt_k * g_k` of every path sub-step at its *executed* position (commanded
-//! position perturbed by the accepted path effects: lag, offset, periodic errors), `K_s` is the
-//! measured TIF widened by the accepted `tif_scale`, and `g_0 = 1` (baseline) while the other
-//! `g_j` are the accepted rate effects' weights (time, covariates, ...), centred by their dwell
-//! mean for conditioning. The linear coefficients are fitted jointly by least squares; the
+//! where `R_s(path, g)` is the process crate's fast removal (the one forward model `simulate`
+//! uses: motion kernels, raster line phases) of the *executed* path (the densified commanded
+//! path perturbed by the accepted path effects: lag, offset, periodic errors) with per-sample
+//! rate weights `g`, through the run's TIF widened by the accepted `tif_scale` (see
+//! [`bonnetlab_process::channels`]); `g_0 = 1` (baseline) while the other `g_j` are the accepted
+//! rate effects' weights (time, covariates, ...), centred by their dwell mean for conditioning. The linear coefficients are fitted jointly by least squares; the
 //! non-linear parameters (registration, scale, lag, periods, ...) are refined by variable
 //! projection (`refine`). Piston and tilt are the measurement's set-up terms: always fitted,
 //! never reported as an effect.
@@ -19,13 +20,15 @@ use std::sync::{Arc, Mutex};
 use bonnetlab_surface::Surface;
 use ndarray::Array2;
 
+use bonnetlab_process::channels::Channels;
+pub use bonnetlab_process::tif::derived::Channel;
+
 use crate::error::CalibrateError;
-use crate::fftconv::{Convolver, Spectrum};
-use crate::grid::{sample, signed_edge_distance, smooth_masked, splat, MapGrid};
+use crate::grid::{sample, signed_edge_distance, smooth_masked, MapGrid};
 use crate::lsq;
-use crate::path::{densify, PathLog, Samples};
+use crate::path::{PathLog, Samples};
 use crate::resample::Resampler;
-use crate::tif::{kernel_gradient, TifMap};
+use crate::tif::TifMap;
 
 /// Largest TIF widening the kernel frame leaves room for.
 pub const MAX_SCALE: f64 = 1.5;
@@ -127,14 +130,8 @@ impl Covariates {
     }
 }
 
-/// Kernel spectra at one TIF scale.
-pub struct Kernels {
-    pub scale: f64,
-    pub k: Spectrum,
-    pub kx: Spectrum,
-    pub ky: Spectrum,
-    pub ks: Spectrum,
-}
+/// The forward model's channels at one TIF scale (shared; one caller at a time).
+pub type Kernels = Mutex<Channels>;
 
 /// The data of a run, prepared once.
 pub struct Problem {
@@ -145,7 +142,8 @@ pub struct Problem {
     pub after_valid: Array2<bool>,
     pub tif: TifMap,
     pub samples: Samples,
-    pub conv: Convolver,
+    /// The densified commanded path (the samples' positions).
+    pub path: PathLog,
     /// Flat indices (row-major) of the analysis pixels (valid in the before map).
     pub idx: Vec<usize>,
     /// Normalised coordinates of the analysis pixels for the tilt columns.
@@ -187,11 +185,8 @@ impl Problem {
             .support_radius_mm()
             .max(2.0 * grid.dx_mm.max(grid.dy_mm));
         let tif = tif.clone();
-        let hr = ((MAX_SCALE * radius * 1.1) / grid.dy_mm).ceil() as usize + 1;
-        let hc = ((MAX_SCALE * radius * 1.1) / grid.dx_mm).ceil() as usize + 1;
-        let conv = Convolver::new(grid.rows, grid.cols, hr, hc);
-        let samples = densify(path, 0.5 * grid.dx_mm.min(grid.dy_mm));
-        if samples.is_empty() {
+        let (samples, path) = Samples::of(path, 0.5 * grid.dx_mm.min(grid.dy_mm));
+        if samples.len() < 2 {
             return Err(CalibrateError::InvalidInput(
                 "the path log has no motion".into(),
             ));
@@ -228,7 +223,7 @@ impl Problem {
             after_valid: after.valid().clone(),
             tif,
             samples,
-            conv,
+            path,
             idx,
             xn,
             yn,
@@ -240,70 +235,44 @@ impl Problem {
         })
     }
 
-    /// Kernel spectra (K, dK/dx, dK/dy, dK/ds) at a TIF scale, cached.
-    pub fn kernels(&self, scale: f64) -> Arc<Kernels> {
+    /// The forward model's channels at a TIF scale, cached.
+    pub fn kernels(&self, scale: f64) -> Result<Arc<Kernels>, CalibrateError> {
         let scale = scale.clamp(0.5, MAX_SCALE);
         if let Ok(cache) = self.kernels.lock() {
-            if let Some(k) = cache.iter().find(|k| k.scale == scale) {
-                return k.clone();
+            if let Some(k) = cache
+                .iter()
+                .find(|k| k.lock().is_ok_and(|c| c.scale() == scale))
+            {
+                return Ok(k.clone());
             }
         }
-        let (hr, hc, dx, dy) = (self.conv.hr, self.conv.hc, self.grid.dx_mm, self.grid.dy_mm);
-        let k0 = self.tif.kernel(dx, dy, hr, hc, scale);
-        // Bilinear splatting convolves the dwell with a tent of variance d^2 / 6 per axis, which
-        // widens the effective spot; pre-compensate to second order: K - (d^2 / 12) d2K/dx2 - ...
-        let (r, c) = k0.dim();
-        let at = |i: isize, j: isize| -> f64 {
-            if i < 0 || j < 0 || i as usize >= r || j as usize >= c {
-                0.0
-            } else {
-                k0[(i as usize, j as usize)]
-            }
-        };
-        let k = Array2::from_shape_fn((r, c), |(i, j)| {
-            let (i, j) = (i as isize, j as isize);
-            let kxx = at(i, j + 1) - 2.0 * at(i, j) + at(i, j - 1);
-            let kyy = at(i + 1, j) - 2.0 * at(i, j) + at(i - 1, j);
-            at(i, j) - (kxx + kyy) / 12.0
-        });
-        let (gx, gy) = kernel_gradient(&k, dx, dy);
-        // dK/ds of K(x / s) = -(1 / s) (x . grad K)
-        let ks = Array2::from_shape_fn(k.dim(), |(a, b)| {
-            let y = (a as f64 - hr as f64) * dy;
-            let x = (b as f64 - hc as f64) * dx;
-            -(x * gx[(a, b)] + y * gy[(a, b)]) / scale
-        });
-        let c = &self.conv;
-        let set = Arc::new(Kernels {
+        let set = Arc::new(Mutex::new(Channels::new(
+            self.tif.field(),
+            &self.grid,
             scale,
-            k: c.kernel_spectrum(&k),
-            kx: c.kernel_spectrum(&gx),
-            ky: c.kernel_spectrum(&gy),
-            ks: c.kernel_spectrum(&ks),
-        });
+        )?));
         if let Ok(mut cache) = self.kernels.lock() {
-            if cache.len() > 8 {
+            if cache.len() > 4 {
                 cache.remove(0);
             }
             cache.push(set.clone());
         }
-        set
+        Ok(set)
     }
 
-    /// Dwell spectrum of `dt_k * g_k` at positions (xs, ys).
-    pub fn dwell_spectrum(&self, xs: &[f64], ys: &[f64], g: Option<&[f64]>) -> Spectrum {
-        let w: Vec<f64> = match g {
-            Some(g) => self
-                .samples
-                .dt_s
-                .iter()
-                .zip(g)
-                .map(|(d, v)| d * v)
-                .collect(),
-            None => self.samples.dt_s.clone(),
-        };
-        let d = splat(&self.grid, self.conv.hr, self.conv.hc, xs, ys, &w);
-        self.conv.dwell_spectrum(&d)
+    /// Removal through one channel of the executed path `exec` with optional per-sample rate
+    /// weights, on the analysis pixels.
+    pub fn channel_column(
+        &self,
+        k: &Kernels,
+        ch: Channel,
+        exec: &PathLog,
+        g: Option<&[f64]>,
+    ) -> Result<Vec<f64>, CalibrateError> {
+        let mut c = k
+            .lock()
+            .map_err(|_| CalibrateError::Processing("forward model poisoned".into()))?;
+        Ok(self.compress(&c.removal(ch, exec, g)?))
     }
 
     /// Compresses a full map to the analysis pixels.
@@ -442,8 +411,8 @@ pub struct Eval {
     /// Resampled after map (full grid) and its mask.
     pub after_res: Array2<f64>,
     pub after_res_valid: Array2<bool>,
-    /// Spectrum of the plain dwell map at the executed positions.
-    pub dwell: Spectrum,
+    /// The executed path (samples at `xs`, `ys`) and the forward model's channels at `scale`.
+    pub exec: PathLog,
     pub kernels: Arc<Kernels>,
     /// Key of the path/kernel state (to reuse columns when only the registration moves).
     pub path_key: Vec<f64>,
@@ -462,7 +431,11 @@ fn path_key(effects: &[Box<dyn Effect>]) -> Vec<f64> {
 
 /// Evaluates the model state; `reuse` lends the columns of a previous evaluation whose path
 /// state is the same.
-pub fn evaluate(p: &Problem, effects: &[Box<dyn Effect>], reuse: Option<&Eval>) -> Eval {
+pub fn evaluate(
+    p: &Problem,
+    effects: &[Box<dyn Effect>],
+    reuse: Option<&Eval>,
+) -> Result<Eval, CalibrateError> {
     let key = path_key(effects);
     let mut reg = [0.0; 3];
     for e in effects {
@@ -492,7 +465,7 @@ pub fn evaluate(p: &Problem, effects: &[Box<dyn Effect>], reuse: Option<&Eval>) 
 
     if let Some(prev) = reuse {
         if prev.path_key == key {
-            return Eval {
+            return Ok(Eval {
                 names: prev.names.clone(),
                 cols: prev.cols.clone(),
                 means: prev.means.clone(),
@@ -504,10 +477,10 @@ pub fn evaluate(p: &Problem, effects: &[Box<dyn Effect>], reuse: Option<&Eval>) 
                 reg,
                 after_res,
                 after_res_valid,
-                dwell: prev.dwell.clone(),
+                exec: prev.exec.clone(),
                 kernels: prev.kernels.clone(),
                 path_key: key,
-            };
+            });
         }
     }
     let mut xs = p.samples.x_mm.clone();
@@ -517,13 +490,13 @@ pub fn evaluate(p: &Problem, effects: &[Box<dyn Effect>], reuse: Option<&Eval>) 
         e.perturb(p, &mut xs, &mut ys);
         scale *= e.scale();
     }
-    let kernels = p.kernels(scale);
-    let dwell = p.dwell_spectrum(&xs, &ys, None);
+    let kernels = p.kernels(scale)?;
+    let exec = p.samples.path_through(&xs, &ys);
     let mut names = vec!["baseline".to_string()];
-    let mut cols = vec![p.compress(&p.conv.apply(&dwell, &kernels.k))];
+    let mut cols = vec![p.channel_column(&kernels, Channel::Value, &exec, None)?];
     let mut means = vec![0.0];
     let terms: Vec<(String, Vec<f64>)> = effects.iter().flat_map(|e| e.rate_terms(p)).collect();
-    let built: Vec<(String, Vec<f64>, f64)> = terms_columns(p, &xs, &ys, &kernels, terms);
+    let built: Vec<(String, Vec<f64>, f64)> = terms_columns(p, &exec, &kernels, terms)?;
     for (n, c, mean) in built {
         names.push(n);
         cols.push(c);
@@ -538,7 +511,7 @@ pub fn evaluate(p: &Problem, effects: &[Box<dyn Effect>], reuse: Option<&Eval>) 
         cols.push(v);
         means.push(0.0);
     }
-    Eval {
+    Ok(Eval {
         names,
         cols,
         means,
@@ -550,27 +523,26 @@ pub fn evaluate(p: &Problem, effects: &[Box<dyn Effect>], reuse: Option<&Eval>) 
         reg,
         after_res,
         after_res_valid,
-        dwell,
+        exec,
         kernels,
         path_key: key,
-    }
+    })
 }
 
-/// Columns `K * D_{g - mean(g)}` for rate terms (computed in parallel).
+/// Columns `R(exec, g - mean(g))` for rate terms.
 pub fn terms_columns(
     p: &Problem,
-    xs: &[f64],
-    ys: &[f64],
+    exec: &PathLog,
     kernels: &Kernels,
     terms: Vec<(String, Vec<f64>)>,
-) -> Vec<(String, Vec<f64>, f64)> {
+) -> Result<Vec<(String, Vec<f64>, f64)>, CalibrateError> {
     terms
         .into_iter()
         .map(|(n, g)| {
             let mean = p.samples.dwell_mean(&g);
             let gc: Vec<f64> = g.iter().map(|v| v - mean).collect();
-            let d = p.dwell_spectrum(xs, ys, Some(&gc));
-            (n, p.compress(&p.conv.apply(&d, &kernels.k)), mean)
+            let c = p.channel_column(kernels, Channel::Value, exec, Some(&gc))?;
+            Ok((n, c, mean))
         })
         .collect()
 }

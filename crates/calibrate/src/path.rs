@@ -1,26 +1,28 @@
-//! The commanded tool path (time-stamped tool-centre positions) and its densification into
-//! short sub-steps, each carrying its dwell and the along-path covariates the effects use.
-//!
-//! Between two logged samples the tool is taken to move in a straight line at constant speed
-//! (the log is the commanded motion). Each segment is cut into sub-steps no longer than
-//! `max_step_mm`; a sub-step is represented by its midpoint, its duration `dt_s`, its unit travel
-//! direction and its feed.
+//! The commanded tool path (time-stamped tool-centre positions) as the calibration resolves it:
+//! the samples of the path densified by the process crate ([`PathLog::densified`]: straight
+//! lines at constant speed, pieces no longer than a given step), each carrying its share of the
+//! dwell and the along-path covariates the effects use. Per-sample rate weights and position
+//! perturbations act on these samples; the forward model interpolates them linearly between
+//! samples, as it does for any path.
 
 /// Commanded tool-centre positions in the map frame (mm): the process crate's path type.
 pub use bonnetlab_process::PathLog;
 
-/// Sub-steps of the commanded path (midpoints).
+/// Samples of the densified commanded path.
 #[derive(Debug, Clone, Default)]
 pub struct Samples {
     pub t_s: Vec<f64>,
     pub x_mm: Vec<f64>,
     pub y_mm: Vec<f64>,
+    /// Dwell share of the sample (s): half of each adjacent interval, so a weight interpolated
+    /// linearly between samples has the dwell integral `sum_k dt_k g_k`.
     pub dt_s: Vec<f64>,
-    /// Unit travel direction (0, 0 when the tool stands still).
+    /// Unit travel direction, of the mean velocity of the adjacent intervals (0, 0 when the tool
+    /// stands still).
     pub ux: Vec<f64>,
     pub uy: Vec<f64>,
     pub feed_mm_per_s: Vec<f64>,
-    /// Arc length travelled from the start of the path to the midpoint (mm).
+    /// Arc length travelled from the start of the path to the sample (mm).
     pub arc_mm: Vec<f64>,
     /// Start and end time of the run (s).
     pub t0_s: f64,
@@ -56,43 +58,71 @@ impl Samples {
     }
 }
 
-/// Cuts the path into sub-steps of at most `max_step_mm` (and at least one per segment).
-pub fn densify(path: &PathLog, max_step_mm: f64) -> Samples {
-    let step = max_step_mm.max(1e-6);
-    let mut s = Samples {
-        t0_s: path.t_s.first().copied().unwrap_or(0.0),
-        t1_s: path.t_s.last().copied().unwrap_or(0.0),
-        ..Samples::default()
-    };
-    let mut arc = 0.0;
-    for k in 0..path.len().saturating_sub(1) {
-        let (t0, t1) = (path.t_s[k], path.t_s[k + 1]);
-        let (x0, y0) = (path.x_mm[k], path.y_mm[k]);
-        let (ddx, ddy) = (path.x_mm[k + 1] - x0, path.y_mm[k + 1] - y0);
-        let len = ddx.hypot(ddy);
-        // A segment implying an absurd number of sub-steps is bad data; cap keeps memory bounded.
-        let n = ((len / step).ceil() as usize).clamp(1, 100_000);
-        let dt = (t1 - t0) / n as f64;
-        let (ux, uy) = if len > 0.0 {
-            (ddx / len, ddy / len)
-        } else {
-            (0.0, 0.0)
+impl Samples {
+    /// The samples of `path` densified to pieces of at most `max_step_mm`, and that densified
+    /// path (the commanded motion, unchanged).
+    pub fn of(path: &PathLog, max_step_mm: f64) -> (Samples, PathLog) {
+        let d = path.densified(max_step_mm.max(1e-6));
+        let n = d.len();
+        let mut s = Samples {
+            t0_s: d.t_s.first().copied().unwrap_or(0.0),
+            t1_s: d.t_s.last().copied().unwrap_or(0.0),
+            t_s: d.t_s.clone(),
+            x_mm: d.x_mm.clone(),
+            y_mm: d.y_mm.clone(),
+            ..Samples::default()
         };
-        let feed = len / (t1 - t0);
-        for m in 0..n {
-            let f = (m as f64 + 0.5) / n as f64;
-            s.t_s.push(t0 + f * (t1 - t0));
-            s.x_mm.push(x0 + f * ddx);
-            s.y_mm.push(y0 + f * ddy);
+        // Velocity of interval k (between samples k and k + 1).
+        let vel: Vec<(f64, f64, f64)> = (0..n.saturating_sub(1))
+            .map(|k| {
+                let dt = d.t_s[k + 1] - d.t_s[k];
+                let (dx, dy) = (d.x_mm[k + 1] - d.x_mm[k], d.y_mm[k + 1] - d.y_mm[k]);
+                (dx / dt, dy / dt, dt)
+            })
+            .collect();
+        let mut arc = 0.0;
+        for k in 0..n {
+            let before = k.checked_sub(1).map(|j| vel[j]);
+            let after = vel.get(k).copied();
+            let (mut vx, mut vy, mut m, mut dt) = (0.0, 0.0, 0.0, 0.0);
+            for (ax, ay, adt) in before.into_iter().chain(after) {
+                vx += ax;
+                vy += ay;
+                m += 1.0;
+                dt += 0.5 * adt;
+            }
+            let (vx, vy) = if m > 0.0 {
+                (vx / m, vy / m)
+            } else {
+                (0.0, 0.0)
+            };
+            let speed = vx.hypot(vy);
+            let (ux, uy) = if speed > 1e-12 {
+                (vx / speed, vy / speed)
+            } else {
+                (0.0, 0.0)
+            };
+            if k > 0 {
+                arc += (d.x_mm[k] - d.x_mm[k - 1]).hypot(d.y_mm[k] - d.y_mm[k - 1]);
+            }
             s.dt_s.push(dt);
             s.ux.push(ux);
             s.uy.push(uy);
-            s.feed_mm_per_s.push(feed);
-            s.arc_mm.push(arc + f * len);
+            s.feed_mm_per_s.push(speed);
+            s.arc_mm.push(arc);
         }
-        arc += len;
+        (s, d)
     }
-    s
+
+    /// The path through `(xs, ys)` at the samples' times (the executed path of a perturbed
+    /// state).
+    pub fn path_through(&self, xs: &[f64], ys: &[f64]) -> PathLog {
+        PathLog {
+            t_s: self.t_s.clone(),
+            x_mm: xs.to_vec(),
+            y_mm: ys.to_vec(),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -100,20 +130,22 @@ mod tests {
     use super::*;
 
     #[test]
-    fn densify_conserves_time_and_length() {
+    fn samples_share_the_time_and_follow_the_motion() {
         let p = PathLog::new(
             vec![0.0, 2.0, 3.0],
             vec![0.0, 1.0, 1.0],
             vec![0.0, 0.0, 0.5],
         )
         .unwrap();
-        let s = densify(&p, 0.1);
+        let (s, d) = Samples::of(&p, 0.1);
         let total: f64 = s.dt_s.iter().sum();
         assert!((total - 3.0).abs() < 1e-12);
-        assert_eq!(s.len(), 10 + 5);
-        assert!((s.feed_mm_per_s[0] - 0.5).abs() < 1e-12);
+        assert_eq!(s.len(), 10 + 5 + 1);
+        assert_eq!(d.len(), s.len());
+        assert!((s.feed_mm_per_s[3] - 0.5).abs() < 1e-12);
         assert!((s.uy[12] - 1.0).abs() < 1e-12);
-        assert!((s.arc_mm[14] - (1.0 + 0.45)).abs() < 1e-12);
-        assert!(PathLog::new(vec![0.0, 0.0], vec![0.0; 2], vec![0.0; 2]).is_err());
+        assert!((s.arc_mm[14] - (1.0 + 0.4)).abs() < 1e-12);
+        // The corner between the two segments: the mean of their velocities.
+        assert!((s.ux[10] - s.uy[10]).abs() < 1e-12);
     }
 }

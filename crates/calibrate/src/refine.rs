@@ -62,7 +62,7 @@ pub fn jacobian(
         t[i] += steps[i];
         let mut trial: Vec<Box<dyn Effect>> = effects.to_vec();
         set_nl(&mut trial, &t);
-        let ev = evaluate(p, &trial, Some(ev0));
+        let ev = evaluate(p, &trial, Some(ev0))?;
         let r = if profiled {
             fit(&ev, &[])?.resid
         } else {
@@ -114,7 +114,7 @@ pub fn refine(
     effects: &mut [Box<dyn Effect>],
     iters: usize,
 ) -> Result<(Eval, Fit), CalibrateError> {
-    let mut ev = evaluate(p, effects, None);
+    let mut ev = evaluate(p, effects, None)?;
     let mut f = fit(&ev, &[])?;
     let (mut theta, _) = nl_vec(effects);
     if theta.is_empty() {
@@ -146,7 +146,7 @@ pub fn refine(
             let t: Vec<f64> = theta.iter().zip(&delta).map(|(a, d)| a - d).collect();
             let mut trial: Vec<Box<dyn Effect>> = effects.to_vec();
             set_nl(&mut trial, &t);
-            let ev_t = evaluate(p, &trial, Some(&ev));
+            let ev_t = evaluate(p, &trial, Some(&ev))?;
             let f_t = fit(&ev_t, &[])?;
             // Compare mean squares: the valid aperture may change slightly with registration.
             if f_t.rss / f_t.n.max(1.0) < f.rss / f.n.max(1.0) {

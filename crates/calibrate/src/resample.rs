@@ -40,7 +40,7 @@ struct LineShift {
 
 impl LineShift {
     fn new(n: usize) -> Self {
-        let len = crate::fftconv::smooth_len(2 * n, &[3, 5, 7], true);
+        let len = bonnetlab_process::fft::smooth_len(2 * n, &[3, 5, 7], true);
         let mut p = RealFftPlanner::<f64>::new();
         LineShift {
             n,

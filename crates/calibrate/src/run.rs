@@ -150,8 +150,8 @@ fn prune(
     effects: &mut Vec<Box<dyn Effect>>,
     accepted: &mut Vec<(String, f64, f64, Score)>,
     sp: &crate::selection::Split,
-) {
-    let ev = crate::model::evaluate(p, effects, None);
+) -> Result<(), CalibrateError> {
+    let ev = crate::model::evaluate(p, effects, None)?;
     for (k, e) in effects.iter().enumerate() {
         let names: Vec<String> = e.rate_terms(p).into_iter().map(|(n, _)| n).collect();
         if names.is_empty() {
@@ -174,9 +174,10 @@ fn prune(
         if !holdout(&reduced, &extra, sp, &bg).significant() {
             effects.remove(k);
             accepted.remove(k);
-            return;
+            return Ok(());
         }
     }
+    Ok(())
 }
 
 /// Backward check of every accepted effect after the later ones were refined with it: an
@@ -196,7 +197,7 @@ fn drop_negligible(
     for k in 0..effects.len() {
         let mut without: Vec<Box<dyn Effect>> = effects.clone();
         without.remove(k);
-        let f0 = fit(&crate::model::evaluate(p, &without, None), &[])?;
+        let f0 = fit(&crate::model::evaluate(p, &without, None)?, &[])?;
         if f0.rss / f0.n.max(1.0) >= 1.05 * ms {
             continue;
         }
@@ -390,7 +391,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     // backward check dropped one.
     let before_prune = effects.len();
     if effects.len() > 1 {
-        prune(p, &mut effects, &mut accepted, &sp);
+        prune(p, &mut effects, &mut accepted, &sp)?;
     }
     if effects.len() != before_prune {
         let (e2, f2) = refine(p, &mut effects, 2 * opts.refine_iters)?;
@@ -475,7 +476,7 @@ fn clone_eval_shell(ev: &Eval) -> Eval {
         reg: ev.reg,
         after_res: Array2::zeros((0, 0)),
         after_res_valid: Array2::from_elem((0, 0), false),
-        dwell: ev.dwell.clone(),
+        exec: ev.exec.clone(),
         kernels: ev.kernels.clone(),
         path_key: Vec::new(),
     }

@@ -16,10 +16,16 @@ use rustfft::{Fft, FftPlanner};
 
 /// Smallest n' >= n whose only prime factors are 2, 3, 5 and 7 (fast FFT sizes).
 pub fn fast_len(n: usize) -> usize {
-    let mut m = n.max(1);
+    smooth_len(n, &[2, 3, 5, 7], false)
+}
+
+/// Smallest n' >= n (odd when `odd`) whose prime factors are all in `primes`.
+pub fn smooth_len(n: usize, primes: &[usize], odd: bool) -> usize {
+    let step = if odd { 2 } else { 1 };
+    let mut m = if odd { n.max(1) | 1 } else { n.max(1) };
     loop {
         let mut k = m;
-        for p in [2, 3, 5, 7] {
+        for &p in primes {
             while k.is_multiple_of(p) {
                 k /= p;
             }
@@ -27,7 +33,7 @@ pub fn fast_len(n: usize) -> usize {
         if k == 1 {
             return m;
         }
-        m += 1;
+        m += step;
     }
 }
 

@@ -72,6 +72,14 @@ impl Grid {
         )
     }
 
+    /// Centre of the map (mm): the mid-point between its outer pixel centres.
+    pub fn centre_mm(&self) -> (f64, f64) {
+        (
+            self.x0_mm + 0.5 * (self.cols as f64 - 1.0) * self.dx_mm,
+            self.y0_mm + 0.5 * (self.rows as f64 - 1.0) * self.dy_mm,
+        )
+    }
+
     /// The grid grown by `grow_rows` / `grow_cols` pixels on every side (same pixel size).
     pub fn grown(&self, grow_rows: usize, grow_cols: usize) -> Grid {
         Grid {

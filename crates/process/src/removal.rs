@@ -296,7 +296,7 @@ pub struct FastRemoval {
     ext: Grid,
     h: (usize, usize),
     conv: MultiConvolver,
-    field: Box<dyn RateField>,
+    field: Box<dyn RateField + Send>,
     /// Cached line-phase kernels: (motion kind 1 = along X / 2 = along Y, phase in 1 / 2^20
     /// pixel, kernel index in `conv`).
     phases: Vec<(usize, u32, usize)>,
@@ -324,14 +324,14 @@ impl FastRemoval {
     /// From a continuous rate field (a model): the motion kernels are its exact point values
     /// and one-pixel averages, so the fast removal matches the exact deposition of the same
     /// field even where the footprint has a steep edge.
-    pub fn from_field<F: RateField + Clone + 'static>(
+    pub fn from_field<F: RateField + Send + Clone + 'static>(
         field: &F,
         grid: &Grid,
     ) -> Result<FastRemoval, ProcessError> {
         Self::build(Box::new(field.clone()), grid)
     }
 
-    fn build(field: Box<dyn RateField>, grid: &Grid) -> Result<FastRemoval, ProcessError> {
+    fn build(field: Box<dyn RateField + Send>, grid: &Grid) -> Result<FastRemoval, ProcessError> {
         let k = kernels_from_field(field.as_ref(), grid.dx_mm, grid.dy_mm)?;
         let (p0, p1) = k[0].half_widths();
         // Row and column margin of the largest kernel (phase kernels add two rows or columns).

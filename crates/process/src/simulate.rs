@@ -105,6 +105,19 @@ impl ToolModel {
     }
 }
 
+/// The tool model is the rate field it holds (so it can be shared as one).
+impl RateField for ToolModel {
+    fn rate_at_mm(&self, dx_mm: f64, dy_mm: f64) -> f64 {
+        self.field().rate_at_mm(dx_mm, dy_mm)
+    }
+    fn half_extent_mm(&self) -> (f64, f64) {
+        self.field().half_extent_mm()
+    }
+    fn volume_rate_nm_mm2_per_s(&self) -> Option<f64> {
+        self.field().volume_rate_nm_mm2_per_s()
+    }
+}
+
 /// A predicted run.
 #[derive(Debug, Clone)]
 pub struct Prediction {

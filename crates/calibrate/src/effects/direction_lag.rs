@@ -3,7 +3,7 @@
 //! Linearised column `(dK/dx) * D_{ux} + (dK/dy) * D_{uy}` (from `K(x - p + L u)`).
 
 use crate::effects::{Candidate, Current};
-use crate::model::{Effect, Linear, Param, Problem};
+use crate::model::{Channel, Effect, Linear, Param, Problem};
 
 #[derive(Debug, Clone)]
 pub struct DirectionLag {
@@ -48,8 +48,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         return Vec::new();
     }
     let s = &cur.p.samples;
-    let k = &cur.ev.kernels;
-    let col = cur.column(&[(&s.ux, &k.kx), (&s.uy, &k.ky)]);
+    let col = cur.column(&[(&s.ux, Channel::Dx), (&s.uy, Channel::Dy)]);
     vec![Candidate {
         key: "direction_lag".into(),
         kind: "direction_lag",

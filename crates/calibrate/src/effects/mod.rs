@@ -2,8 +2,8 @@
 //! (linearised columns about the current state, with initial parameters from their
 //! coefficients) and reporting. Selection (`selection`) decides which are accepted.
 //!
-//! Linearisations used (s0 = baseline rate scale, K the kernel, D_g the dwell map of
-//! `dt * g` at the executed positions):
+//! Linearisations used (s0 = baseline rate scale, K the TIF, `K * D_g` the forward model's
+//! removal of the executed path with rate weights g; see `model`):
 //! - rate effects are exactly linear: column `K * D_g`;
 //! - a path displacement e(t) of the executed spot: `K(x - p - e) ~ K - e . grad K`, column
 //!   `-(dK/dx) * D_{e_x} - (dK/dy) * D_{e_y}` per unit displacement;
@@ -23,7 +23,7 @@ pub mod tif_scale;
 
 use ndarray::Array2;
 
-use crate::model::{Effect, Eval, Problem};
+use crate::model::{Channel, Effect, Eval, Problem};
 
 /// A candidate effect: its linearised columns and how to turn their fitted coefficients into
 /// the effect's initial state.
@@ -58,43 +58,47 @@ impl Current<'_> {
     }
 
     /// Matched filter of the residual along the path: `h_k = dt_k * sum_x r(x) K'(x - p_k)`, the
-    /// residual's projection on a unit rate (or displacement) impulse at sub-step k for kernel K'.
-    pub fn matched(&self, kernel: &crate::fftconv::Spectrum) -> Vec<f64> {
-        let c = self.p.conv.correlate(&self.resid_map(), kernel);
-        let g = &self.p.grid;
-        let (hr, hc) = (self.p.conv.hr as f64, self.p.conv.hc as f64);
-        let (er, ec) = c.dim();
-        self.ev
-            .xs
-            .iter()
-            .zip(&self.ev.ys)
-            .zip(&self.p.samples.dt_s)
-            .map(|((&x, &y), &dt)| {
-                let fj = (x - g.x0_mm) / g.dx_mm + hc;
-                let fi = (y - g.y0_mm) / g.dy_mm + hr;
-                if !(fi >= 0.0 && fj >= 0.0 && fi < (er - 1) as f64 && fj < (ec - 1) as f64) {
-                    return 0.0;
-                }
-                let (i0, j0) = (fi as usize, fj as usize);
-                let (a, b) = (fi - i0 as f64, fj - j0 as f64);
-                dt * ((1.0 - a) * ((1.0 - b) * c[(i0, j0)] + b * c[(i0, j0 + 1)])
-                    + a * ((1.0 - b) * c[(i0 + 1, j0)] + b * c[(i0 + 1, j0 + 1)]))
-            })
-            .collect()
+    /// residual's projection on a unit rate (or displacement) impulse at sample k for the
+    /// forward model's channel `ch` (K' = the TIF or one of its derivatives). A channel that
+    /// cannot be evaluated gives zeros (no candidate can come of it).
+    pub fn matched(&self, ch: Channel) -> Vec<f64> {
+        let r = self.resid_map();
+        let h = self
+            .ev
+            .kernels
+            .lock()
+            .ok()
+            .and_then(|mut c| c.matched(ch, &r, &self.ev.exec).ok());
+        match h {
+            Some(h) => h
+                .iter()
+                .zip(&self.p.samples.dt_s)
+                .map(|(v, dt)| v * dt)
+                .collect(),
+            None => vec![0.0; self.p.samples.len()],
+        }
     }
 
-    /// Column `sum_m K_m * D_{g_m}` at the executed positions, on the analysis pixels.
-    pub fn column(&self, terms: &[(&[f64], &crate::fftconv::Spectrum)]) -> Vec<f64> {
-        let spectra: Vec<crate::fftconv::Spectrum> = terms
-            .iter()
-            .map(|(g, _)| self.p.dwell_spectrum(&self.ev.xs, &self.ev.ys, Some(g)))
-            .collect();
-        let pairs: Vec<(&crate::fftconv::Spectrum, &crate::fftconv::Spectrum)> = spectra
-            .iter()
-            .zip(terms)
-            .map(|(d, (_, k))| (d, *k))
-            .collect();
-        self.p.compress(&self.p.conv.apply_sum(&pairs))
+    /// Column `sum_m R_{ch_m}(exec, g_m)` (the forward model through channel `ch_m` of the
+    /// executed path with rate weights `g_m`), on the analysis pixels; zeros when a channel
+    /// cannot be evaluated (no candidate can come of it).
+    pub fn column(&self, terms: &[(&[f64], Channel)]) -> Vec<f64> {
+        let sum = self.ev.kernels.lock().ok().and_then(|mut c| {
+            let t: Vec<(Channel, Option<&[f64]>)> =
+                terms.iter().map(|(g, ch)| (*ch, Some(*g))).collect();
+            c.removal_sum(&self.ev.exec, &t).ok()
+        });
+        match sum {
+            Some(a) => self.p.compress(&a),
+            None => vec![0.0; self.p.idx.len()],
+        }
+    }
+
+    /// Column of the plain executed path through channel `ch` (no rate weights).
+    pub fn plain_column(&self, ch: Channel) -> Vec<f64> {
+        self.p
+            .channel_column(&self.ev.kernels, ch, &self.ev.exec, None)
+            .unwrap_or_else(|_| vec![0.0; self.p.idx.len()])
     }
 
     /// Baseline column's coefficient scale (for turning column coefficients into parameters).
@@ -123,7 +127,7 @@ pub fn spectral_peaks(q: &[f64], h: &[f64], p_min: f64, p_max: f64, n: usize) ->
         let b = (((qk - lo) / bin) as usize).min(nb - 1);
         binned[b] += hk;
     }
-    let nfft = crate::fftconv::fast_len(4 * nb);
+    let nfft = bonnetlab_process::fft::fast_len(4 * nb);
     let mut planner = realfft::RealFftPlanner::<f64>::new();
     let fft = planner.plan_fft_forward(nfft);
     let mut input = vec![0.0; nfft];

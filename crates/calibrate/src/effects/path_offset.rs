@@ -4,7 +4,7 @@
 //! before-map structure.
 
 use crate::effects::{Candidate, Current};
-use crate::model::{Effect, Linear, Param, Problem};
+use crate::model::{Channel, Effect, Linear, Param, Problem};
 
 #[derive(Debug, Clone)]
 pub struct PathOffset {
@@ -49,15 +49,13 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     if cur.has("path_offset") {
         return Vec::new();
     }
-    let p = cur.p;
-    let k = &cur.ev.kernels;
-    let cx: Vec<f64> = p
-        .compress(&p.conv.apply(&cur.ev.dwell, &k.kx))
+    let cx: Vec<f64> = cur
+        .plain_column(Channel::Dx)
         .into_iter()
         .map(|v| -v)
         .collect();
-    let cy: Vec<f64> = p
-        .compress(&p.conv.apply(&cur.ev.dwell, &k.ky))
+    let cy: Vec<f64> = cur
+        .plain_column(Channel::Dy)
         .into_iter()
         .map(|v| -v)
         .collect();

@@ -6,7 +6,7 @@
 //! periods; the linearised columns `-(dK/daxis) * D_{sin}`, `... D_{cos}` give a and b.
 
 use crate::effects::{spectral_peaks, Candidate, Current};
-use crate::model::{Effect, Linear, Param, Problem};
+use crate::model::{Channel, Effect, Linear, Param, Problem};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Coord {
@@ -130,11 +130,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     );
     let mut out = Vec::new();
     for axis_x in [true, false] {
-        let kern = if axis_x {
-            &cur.ev.kernels.kx
-        } else {
-            &cur.ev.kernels.ky
-        };
+        let kern = if axis_x { Channel::Dx } else { Channel::Dy };
         let h = cur.matched(kern);
         for coord in [Coord::X, Coord::Y, Coord::Arc, Coord::Time] {
             let key = format!(

@@ -13,7 +13,7 @@
 //! plus a spurious drift and x dependence (final 0.66 nm against a 0.42 nm floor).
 
 use crate::effects::{Candidate, Current};
-use crate::model::{Effect, Linear, Param, Problem};
+use crate::model::{Channel, Effect, Linear, Param, Problem};
 
 pub const COVARIATES: [(&str, &str); 6] = [
     ("x", "1/mm"),
@@ -108,10 +108,10 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
             continue;
         }
         let comp = companions(name, cur);
-        let mut extra = vec![cur.column(&[(&g, &cur.ev.kernels.k)])];
+        let mut extra = vec![cur.column(&[(&g, Channel::Value)])];
         for c in &comp {
             if let Some(qc) = cur.p.covariates.get(c) {
-                extra.push(cur.column(&[(&centred(qc), &cur.ev.kernels.k)]));
+                extra.push(cur.column(&[(&centred(qc), Channel::Value)]));
             }
         }
         out.push(Candidate {

@@ -3,7 +3,7 @@
 //! Exactly linear: column `K * D_tau`.
 
 use crate::effects::{Candidate, Current};
-use crate::model::{Effect, Linear, Param, Problem};
+use crate::model::{Channel, Effect, Linear, Param, Problem};
 
 #[derive(Debug, Clone)]
 pub struct RateDrift;
@@ -40,7 +40,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let t = tau(cur.p);
     let mean = cur.p.samples.dwell_mean(&t);
     let g: Vec<f64> = t.iter().map(|v| v - mean).collect();
-    let col = cur.column(&[(&g, &cur.ev.kernels.k)]);
+    let col = cur.column(&[(&g, Channel::Value)]);
     vec![Candidate {
         key: "rate_drift".into(),
         kind: "rate_drift",

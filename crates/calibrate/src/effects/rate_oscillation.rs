@@ -5,7 +5,7 @@
 //! projection.
 
 use crate::effects::{spectral_peaks, Candidate, Current};
-use crate::model::{Effect, Linear, Param, Problem};
+use crate::model::{Channel, Effect, Linear, Param, Problem};
 
 #[derive(Debug, Clone)]
 pub struct RateOscillation {
@@ -72,7 +72,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let duration = (s.t1_s - s.t0_s).max(1e-9);
     let mean_feed = s.arc_mm.last().copied().unwrap_or(0.0) / duration;
     let pix = p.grid.dx_mm.max(p.grid.dy_mm);
-    let h = cur.matched(&cur.ev.kernels.k);
+    let h = cur.matched(Channel::Value);
     let t: Vec<f64> = s.t_s.iter().map(|v| v - s.t0_s).collect();
     let mut out = Vec::new();
     for (period, _) in spectral_peaks(&t, &h, 4.0 * pix / mean_feed.max(1e-9), duration / 2.5, 3) {
@@ -81,7 +81,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
             .map(|(_, g)| {
                 let m = s.dwell_mean(g);
                 let gc: Vec<f64> = g.iter().map(|v| v - m).collect();
-                cur.column(&[(&gc, &cur.ev.kernels.k)])
+                cur.column(&[(&gc, Channel::Value)])
             })
             .collect();
         out.push(Candidate {

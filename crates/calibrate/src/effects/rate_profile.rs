@@ -5,7 +5,7 @@
 //! fit as well, since the profile spends more parameters.
 
 use crate::effects::{Candidate, Current};
-use crate::model::{Effect, Linear, Param, Problem};
+use crate::model::{Channel, Effect, Linear, Param, Problem};
 
 pub const KNOTS: usize = 7;
 
@@ -61,7 +61,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         .map(|(_, g)| {
             let m = s.dwell_mean(g);
             let gc: Vec<f64> = g.iter().map(|v| v - m).collect();
-            cur.column(&[(&gc, &cur.ev.kernels.k)])
+            cur.column(&[(&gc, Channel::Value)])
         })
         .collect();
     vec![Candidate {

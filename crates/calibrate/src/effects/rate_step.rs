@@ -4,7 +4,7 @@
 //! dwell variance; the column is exactly linear, the step time refined by variable projection.
 
 use crate::effects::{Candidate, Current};
-use crate::model::{Effect, Linear, Param, Problem};
+use crate::model::{Channel, Effect, Linear, Param, Problem};
 
 #[derive(Debug, Clone)]
 pub struct RateStep {
@@ -58,7 +58,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     }
     let p = cur.p;
     let s = &p.samples;
-    let h = cur.matched(&cur.ev.kernels.k);
+    let h = cur.matched(Channel::Value);
     let wt: f64 = s.dt_s.iter().sum();
     let ht: f64 = h.iter().sum();
     // Scan from the end: after-sums of h and dwell.
@@ -81,7 +81,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let g = step(p, at);
     let m = s.dwell_mean(&g);
     let gc: Vec<f64> = g.iter().map(|v| v - m).collect();
-    let col = cur.column(&[(&gc, &cur.ev.kernels.k)]);
+    let col = cur.column(&[(&gc, Channel::Value)]);
     vec![Candidate {
         key: "rate_step".into(),
         kind: "rate_step",

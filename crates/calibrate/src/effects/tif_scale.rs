@@ -2,7 +2,7 @@
 //! its peak rate is left to the global rate fit). Linearised column `(dK/ds) * D`.
 
 use crate::effects::{Candidate, Current};
-use crate::model::{Effect, Linear, Param, MAX_SCALE};
+use crate::model::{Channel, Effect, Linear, Param, MAX_SCALE};
 
 #[derive(Debug, Clone)]
 pub struct TifScale {
@@ -43,9 +43,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     if cur.has("tif_scale") {
         return Vec::new();
     }
-    let col = cur
-        .p
-        .compress(&cur.p.conv.apply(&cur.ev.dwell, &cur.ev.kernels.ks));
+    let col = cur.plain_column(Channel::Ds);
     let s = cur.ev.scale;
     vec![Candidate {
         key: "tif_scale".into(),

@@ -67,7 +67,7 @@ pub struct FeedRealisation {
 
 /// Realises `dwell_s` (s per pixel on `grid`, the problem's dwell grid) as a raster under
 /// `limits`, with the continuous rate field `field` (the model the problem's TIF samples).
-pub fn realise<F: RateField + Clone + 'static>(
+pub fn realise<F: RateField + Send + Clone + 'static>(
     p: &DwellProblem,
     dwell_s: &Array2<f64>,
     field: &F,
