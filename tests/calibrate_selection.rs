@@ -8,20 +8,32 @@ use bonnetlab::calibrate::run::Calibration;
 use bonnetlab::calibrate::synth::{Injected, SynthConfig, Waveform, WiggleCoord};
 use common::calibrate::{param, run, run_cfg, summary};
 
-/// No effect injected, the measured spot 0.8 mm off its map centre: nothing is accepted (issue
-/// 14: the tests' own spot pipeline used to report a path offset of (-0.68, +0.45) mm for it).
-/// Still open (issue 14): at 0.25 mm off, seed 23 accepts a feed covariate of -0.04 s/mm with
-/// the residual already at the noise floor (0.428 vs 0.438 nm), and noise-free runs accept
-/// tif_scale 1.0044 plus a feed covariate on a 0.025 nm residual: the calibration's own
-/// convolution (bilinear splat, point-sampled kernel) still differs from exact deposition.
+/// No effect injected (issue 14's null runs): noise-free or noisy, the measured spot centred or
+/// 0.25 or 0.8 mm off its map centre: nothing is accepted. Before the calibration used the
+/// process crate's forward model, 0.25 mm off (seed 23) accepted a feed covariate of -0.04 s/mm
+/// at the noise floor, noise-free runs accepted tif_scale 1.0044 plus a feed covariate, and the
+/// tests' own spot pipeline reported a path offset of (-0.68, +0.45) mm at 0.8 mm off.
 #[test]
 fn off_centre_spots_accept_no_effect() {
-    let c = run_cfg(&SynthConfig {
-        seed: 23,
-        spot_offset_mm: (0.8, -0.48),
-        ..SynthConfig::default()
-    });
-    assert!(c.effects.is_empty(), "{}", summary(&c));
+    let mut bad = Vec::new();
+    for (seed, noise_nm) in [(23, 0.3), (24, 0.0)] {
+        for off in [0.0, 0.25, 0.8] {
+            let c = run_cfg(&SynthConfig {
+                seed,
+                noise_nm,
+                spot_noise_nm: if noise_nm > 0.0 { 0.1 } else { 0.0 },
+                spot_offset_mm: (off, -0.6 * off),
+                ..SynthConfig::default()
+            });
+            if !c.effects.is_empty() {
+                bad.push(format!(
+                    "seed {seed} noise {noise_nm} off {off}: {}",
+                    summary(&c)
+                ));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
 }
 
 #[test]

@@ -9,7 +9,6 @@
 use std::path::{Path, PathBuf};
 
 use bonnetlab_calibrate::model::Problem;
-use bonnetlab_calibrate::psd::psd_1d;
 use bonnetlab_calibrate::run::{calibrate, Calibration, Options};
 use bonnetlab_surface::Surface;
 use ndarray::Array2;
@@ -199,7 +198,21 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
             (&cal.maps.final_residual_nm, "final"),
         ] {
             if let Some(m) = m {
-                let p = psd_1d(&m.0, &m.1, if along_x { dx } else { dy }, along_x);
+                let Ok(surf) = bonnetlab_surface::Surface::with_mask(
+                    m.0.clone(),
+                    m.1.clone(),
+                    Some(dx),
+                    Some(dy),
+                ) else {
+                    continue;
+                };
+                let opts = bonnetlab_spectrum::PsdOptions::default();
+                let psd = if along_x {
+                    bonnetlab_spectrum::psd_x(&surf, &opts)
+                } else {
+                    bonnetlab_spectrum::psd_y(&surf, &opts)
+                };
+                let Ok(p) = psd else { continue };
                 let (f, s): (Vec<f64>, Vec<f64>) = p
                     .freq_per_mm
                     .iter()

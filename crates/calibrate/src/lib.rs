@@ -1,6 +1,7 @@
 //! Closing the loop with measured data: registration, residual, diagnosis, an effect library
 //! with hold-out selection, and a generator of synthetic measured runs.
 
+pub mod coarse;
 pub mod error;
 
 pub mod grid;
@@ -13,7 +14,6 @@ pub mod lsq;
 pub mod model;
 pub mod noise;
 pub mod pipeline;
-pub mod psd;
 pub mod refine;
 pub mod resample;
 pub mod run;

@@ -154,6 +154,7 @@ pub struct Problem {
     kernels: Mutex<Vec<Arc<Kernels>>>,
     resampler: Resampler,
     resampled: ResampleCache,
+    coarse: std::sync::OnceLock<Option<crate::coarse::Coarse>>,
 }
 
 type ResampleCache = Mutex<Vec<([f64; 3], Arc<(Array2<f64>, Array2<bool>)>)>>;
@@ -232,6 +233,7 @@ impl Problem {
             kernels: Mutex::new(Vec::new()),
             resampler,
             resampled: Mutex::new(Vec::new()),
+            coarse: std::sync::OnceLock::new(),
         })
     }
 
@@ -273,6 +275,19 @@ impl Problem {
             .lock()
             .map_err(|_| CalibrateError::Processing("forward model poisoned".into()))?;
         Ok(self.compress(&c.removal(ch, exec, g)?))
+    }
+
+    /// The coarse registration of the after map onto the before map (computed once).
+    pub fn coarse(&self) -> Option<crate::coarse::Coarse> {
+        *self.coarse.get_or_init(|| {
+            crate::coarse::coarse_registration(
+                &self.grid,
+                &self.before,
+                &self.before_valid,
+                &self.after,
+                &self.after_valid,
+            )
+        })
     }
 
     /// Compresses a full map to the analysis pixels.

@@ -11,7 +11,8 @@ use ndarray::Array2;
 use serde::Serialize;
 
 use crate::grid::{smooth_masked, MapGrid};
-use crate::psd::psd_1d;
+use bonnetlab_spectrum::psd1d::{psd_x, psd_y, PsdOptions};
+use bonnetlab_surface::Surface;
 
 pub const EXCESS: f64 = 3.0;
 
@@ -83,9 +84,24 @@ pub fn find(
     total_rms_nm: f64,
 ) -> Vec<Unexplained> {
     let mut out = Vec::new();
+    // The project's one 1-D PSD (one-sided, nm^2 mm; per-segment mean removed, the spectrum
+    // crate's dropout and segment rules); the residual already has its piston and tilt fitted.
+    let Ok(surf) = Surface::with_mask(r.clone(), valid.clone(), Some(g.dx_mm), Some(g.dy_mm))
+    else {
+        return out;
+    };
+    let opts = PsdOptions {
+        remove: Vec::new(),
+        ..PsdOptions::default()
+    };
     for along_x in [true, false] {
         let d = if along_x { g.dx_mm } else { g.dy_mm };
-        let p = psd_1d(r, valid, d, along_x);
+        let psd = if along_x {
+            psd_x(&surf, &opts)
+        } else {
+            psd_y(&surf, &opts)
+        };
+        let Ok(p) = psd else { continue };
         let white = 2.0 * noise_rms_nm * noise_rms_nm * d;
         let n = p.psd_nm2_mm.len();
         let sm: Vec<f64> = (0..n)

@@ -11,16 +11,22 @@
 //! the result by less than 1e-6 (checked below, far inside the 0.1 % the issue asks for).
 //!
 //! What is tested is the model as the CLI runs it: `ToolModel::from_source` (analytic models and
-//! measured spots) and `simulate::removal` in fast mode; exact mode on a subset.
+//! measured spots) and `simulate::removal` in fast mode; the calibration's forward model (the
+//! same fast removal, reached through `channels::Channels` on the path densified to half a
+//! pixel, as `bonnetlab_calibrate::model` evaluates every column); exact mode on a subset.
 //!
 //! Metrics: the removal RMS error relative to the reference removal RMS, and the ripple sigma_1
 //! at 1/pitch across the lines (amplitude / sqrt 2 of the least-squares sinusoid at 1/pitch,
 //! fitted with its harmonics below Nyquist and a mean, on the profile across the lines).
 
+use std::sync::Arc;
+
+use bonnetlab_process::channels::Channels;
 use bonnetlab_process::path::PathLog;
 use bonnetlab_process::recipe::TifSource;
 use bonnetlab_process::simulate::{removal, Mode, ToolModel};
 use bonnetlab_process::tif::bonnet::BonnetTif;
+use bonnetlab_process::tif::derived::Channel;
 use bonnetlab_process::tif::{BonnetTifParams, GaussianTif, PressureProfile, RateField, RateScale};
 use bonnetlab_process::Grid;
 use bonnetlab_surface::rng::Rng;
@@ -257,6 +263,15 @@ struct Outcome {
     s1_ref: f64,
 }
 
+/// Which code computes the removal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Engine {
+    /// `simulate::removal` in a mode.
+    Simulate(Mode),
+    /// The calibration's route: the value channel on the densified path.
+    Calibration,
+}
+
 fn run_case(
     truth: &Truth,
     pitch: f64,
@@ -264,7 +279,7 @@ fn run_case(
     phase: f64,
     along_x: bool,
     spot: Option<Spot>,
-    mode: Mode,
+    engine: Engine,
 ) -> Outcome {
     let n = (SIDE_MM / px).round() as usize + 1;
     let grid = Grid::new(n, n, px, px, 0.0, 0.0).unwrap();
@@ -289,7 +304,13 @@ fn run_case(
         }
     }
     .unwrap();
-    let model = removal(&tool, &path, &grid, None, mode).unwrap();
+    let model = match engine {
+        Engine::Simulate(mode) => removal(&tool, &path, &grid, None, mode).unwrap(),
+        Engine::Calibration => Channels::new(Arc::new(tool), &grid, 1.0)
+            .unwrap()
+            .removal(Channel::Value, &path.densified(0.5 * px), None)
+            .unwrap(),
+    };
     let pos: Vec<f64> = (0..n).map(|i| i as f64 * px).collect();
     let reference = reference_profile(truth, &lines, &pos, along_x, 400);
     // The model's profile across the lines (mean along them) and its full-map error.
@@ -352,15 +373,22 @@ fn analytic_tifs_fast_mode_matches_exact_deposition() {
             for px in [0.1, 0.25, 0.5] {
                 for phase in [0.0, 0.37] {
                     for along_x in [true, false] {
-                        let o = run_case(&truth, pitch, px, phase, along_x, None, Mode::Fast);
-                        let label = format!(
-                            "{} pitch {pitch} px {px} phase {phase} {}",
-                            truth.name(),
-                            if along_x { "X-scan" } else { "Y-scan" }
-                        );
-                        rows.push(table_row(&label, &o));
-                        worst.0 = worst.0.max(o.rms_err);
-                        worst.1 = worst.1.max(o.s1_err.abs());
+                        for engine in [Engine::Simulate(Mode::Fast), Engine::Calibration] {
+                            let o = run_case(&truth, pitch, px, phase, along_x, None, engine);
+                            let label = format!(
+                                "{} pitch {pitch} px {px} phase {phase} {} {}",
+                                truth.name(),
+                                if along_x { "X-scan" } else { "Y-scan" },
+                                if engine == Engine::Calibration {
+                                    "calib"
+                                } else {
+                                    "fast"
+                                }
+                            );
+                            rows.push(table_row(&label, &o));
+                            worst.0 = worst.0.max(o.rms_err);
+                            worst.1 = worst.1.max(o.s1_err.abs());
+                        }
                     }
                 }
             }
@@ -387,16 +415,26 @@ fn measured_spots_fast_mode_matches_exact_deposition() {
     for truth in [Truth::gaussian(), Truth::bonnet()] {
         for (pitch, px) in [(1.7, 0.25), (2.7, 0.5), (3.0, 0.5), (1.3, 0.1)] {
             for fineness in [1usize, 4] {
-                for offset_mm in [0.0, 0.25, 0.8] {
+                for (offset_mm, engine) in [
+                    (0.0, Engine::Simulate(Mode::Fast)),
+                    (0.25, Engine::Simulate(Mode::Fast)),
+                    (0.8, Engine::Simulate(Mode::Fast)),
+                    (0.8, Engine::Calibration),
+                ] {
                     let spot = Spot {
                         fineness,
                         offset_mm,
                         noise_nm: 0.1,
                     };
-                    let o = run_case(&truth, pitch, px, 0.37, true, Some(spot), Mode::Fast);
+                    let o = run_case(&truth, pitch, px, 0.37, true, Some(spot), engine);
                     let label = format!(
-                        "{} spot px/{fineness} off {offset_mm} pitch {pitch} px {px}",
-                        truth.name()
+                        "{} spot px/{fineness} off {offset_mm} pitch {pitch} px {px}{}",
+                        truth.name(),
+                        if engine == Engine::Calibration {
+                            " calib"
+                        } else {
+                            ""
+                        }
                     );
                     // The issue's tolerances: sigma1 within 1 % for a spot at a quarter of the
                     // map pixel, 2 % at the map pixel. Not yet met for the Hertz bonnet, whose
@@ -431,7 +469,15 @@ fn measured_spots_fast_mode_matches_exact_deposition() {
 #[test]
 fn exact_mode_matches_the_reference() {
     for truth in [Truth::gaussian(), Truth::bonnet()] {
-        let o = run_case(&truth, 1.7, 0.25, 0.37, true, None, Mode::Exact);
+        let o = run_case(
+            &truth,
+            1.7,
+            0.25,
+            0.37,
+            true,
+            None,
+            Engine::Simulate(Mode::Exact),
+        );
         println!("{}", table_row(&format!("{} exact", truth.name()), &o));
         assert!(o.rms_err < 0.005 && o.s1_err.abs() < 0.01);
     }

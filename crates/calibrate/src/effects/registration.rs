@@ -69,11 +69,21 @@ impl Effect for Registration {
 /// Derivatives of the resampled after map `A(T_theta x)` with respect to (dx, dy, theta) at
 /// the evaluation's registration, from the map lightly smoothed (sigma 1 px), as full maps.
 pub fn after_derivatives(p: &Problem, ev: &Eval) -> [Array2<f64>; 3] {
+    after_derivatives_at(p, &ev.after_res, &ev.after_res_valid, ev.reg)
+}
+
+/// [`after_derivatives`] of an after map resampled at registration `reg`.
+fn after_derivatives_at(
+    p: &Problem,
+    after_res: &Array2<f64>,
+    valid: &Array2<bool>,
+    reg: [f64; 3],
+) -> [Array2<f64>; 3] {
     let g = &p.grid;
-    let a = smooth_masked(&ev.after_res, &ev.after_res_valid, 1.0);
+    let a = smooth_masked(after_res, valid, 1.0);
     let (r, c) = a.dim();
     let (cx, cy) = g.centre_mm();
-    let (ct, st) = (ev.reg[2].cos(), ev.reg[2].sin());
+    let (ct, st) = (reg[2].cos(), reg[2].sin());
     let mut gx = Array2::<f64>::zeros((r, c));
     let mut gy = gx.clone();
     let mut gr = gx.clone();
@@ -117,10 +127,52 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     }
     let p = cur.p;
     let g = &p.grid;
-    let [gx, gy, gr] = after_derivatives(p, cur.ev);
     let base = cur.ev.reg;
     let pix = g.dx_mm.max(g.dy_mm);
     let centre = g.centre_mm();
+    // A coarse estimate far from the current state (more than half a pixel anywhere on the
+    // map): linearise there instead, with one more column for the jump to it.
+    let radius = 0.5 * (g.cols as f64 * g.dx_mm).hypot(g.rows as f64 * g.dy_mm);
+    if let Some(c) = p
+        .coarse()
+        .filter(|c| c.peak_ratio >= crate::coarse::MIN_PEAK_RATIO)
+    {
+        let jump =
+            (c.reg[0] - base[0]).hypot(c.reg[1] - base[1]) + radius * (c.reg[2] - base[2]).abs();
+        if jump > 0.5 * pix {
+            let (a0, v0) = p.resample_after(c.reg);
+            let both: Vec<bool> = p
+                .idx
+                .iter()
+                .map(|&k| {
+                    let ij = (k / g.cols, k % g.cols);
+                    v0[ij] && cur.ev.after_res_valid[ij]
+                })
+                .collect();
+            // m(current) - m(coarse) = A(coarse) - A(current): coefficient 1 at the coarse state.
+            let jump_col: Vec<f64> = p
+                .compress(&(&a0 - &cur.ev.after_res))
+                .into_iter()
+                .zip(&both)
+                .map(|(v, &ok)| if ok { v } else { 0.0 })
+                .collect();
+            let [gx, gy, gr] = after_derivatives_at(p, &a0, &v0, c.reg);
+            let at = c.reg;
+            return vec![Candidate {
+                key: "registration".into(),
+                kind: "registration",
+                extra: vec![jump_col, p.compress(&gx), p.compress(&gy), p.compress(&gr)],
+                make: Box::new(move |k, _s0| {
+                    Box::new(Registration {
+                        p: [at[0] + k[1], at[1] + k[2], at[2] + k[3]],
+                        pixel_mm: pix,
+                        centre_mm: centre,
+                    })
+                }),
+            }];
+        }
+    }
+    let [gx, gy, gr] = after_derivatives(p, cur.ev);
     vec![Candidate {
         key: "registration".into(),
         kind: "registration",
