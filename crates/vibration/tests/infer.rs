@@ -11,7 +11,7 @@ use bonnetlab_surface::{Surface, Term};
 use bonnetlab_vibration::coupling::{direct_removal, CouplingInput, CouplingOptions};
 use bonnetlab_vibration::infer::{
     attribute_difference, counterfactual_effect, infer_forcing, shared_forcing, vibration_effects,
-    CauseEffect, ForcingFit, ForcingModel, InferOptions, RunEffects,
+    CauseEffect, Difference, ForcingFit, ForcingModel, InferOptions, RunEffects,
 };
 use bonnetlab_vibration::params::{Bonnet, VibrationParams};
 use ndarray::Array2;
@@ -38,14 +38,21 @@ fn tif(scale: f64) -> GaussianTif {
     GaussianTif::new(1.0 * scale, 8.0 * scale, 1500.0 / (scale * scale)).unwrap()
 }
 
-fn params(fn_n: f64, noise_n: f64) -> VibrationParams {
+/// The robot at the x2 resonance (558 rpm), broadband force 0.5 N RMS, robot damping `zeta`.
+fn params(fn_n: f64, zeta: f64) -> VibrationParams {
     VibrationParams {
         spindle_rpm: RPM,
         fn_n,
-        noise_force_rms_n: noise_n,
+        noise_force_rms_n: 0.5,
+        zeta1: zeta,
+        zeta2: zeta,
         ..Default::default()
     }
 }
+
+/// Default robot damping ratio and the same plus the suppression element's ζ_e = η / 2.
+const ZETA: f64 = 0.05;
+const ZETA_DAMPED: f64 = 0.05 + 0.115 / 2.0;
 
 fn opts(seed: u64) -> CouplingOptions {
     CouplingOptions {
@@ -107,56 +114,230 @@ fn measure(truth_removal: &Array2<f64>, seed: u64, noise_nm: f64) -> Measured {
     }
 }
 
-#[test]
-fn explore() {
+struct Fitted {
+    model: ForcingModel,
+    fit: ForcingFit,
+    m: Measured,
+}
+
+/// One measured run made by direct deposition with the true TIF `t` (vibration seed 11) and its
+/// forcing fitted with the fast model on TIF `t_model` (vibration seed 2: the inference does not
+/// know the truth's noise realisation).
+fn run(truth: &VibrationParams, bonnet: Bonnet, t: &GaussianTif, t_model: &GaussianTif) -> Fitted {
     let g = grid();
     let p = path();
-    let t = tif(1.0);
-    let truth = params(4.0, 0.5);
     let input = CouplingInput {
         grid: g,
         valid: None,
-        base_tif: &t,
+        base_tif: t,
         path: &p,
-        params: &truth,
+        params: truth,
         pitch_mm: Some(PITCH),
     };
-    let t0 = std::time::Instant::now();
-    let direct = direct_removal(&input, Bonnet::Original, &opts(11)).unwrap();
-    eprintln!("direct {:?}, duration {} s", t0.elapsed(), p.duration_s());
-    let m = measure(&direct, 5, 1.0);
-    let t0 = std::time::Instant::now();
-    let model = ForcingModel::build(&input, Bonnet::Original, &opts(2)).unwrap();
-    eprintln!("model {:?}", t0.elapsed());
-    let t0 = std::time::Instant::now();
+    let direct = direct_removal(&input, bonnet, &opts(11)).unwrap();
+    let m = measure(&direct, 1000 + (truth.fn_n * 10.0) as u64, 1.0);
+    let minput = CouplingInput {
+        base_tif: t_model,
+        ..input
+    };
+    let model = ForcingModel::build(&minput, bonnet, &opts(2)).unwrap();
     let fit = infer_forcing(&model, &m.removal, &InferOptions::default()).unwrap();
-    eprintln!("fit {:?}", t0.elapsed());
-    eprintln!("{}", serde_json_like(&fit));
-    let mean = direct.mean().unwrap();
-    eprintln!("mean removal {mean}");
-}
-
-fn serde_json_like(f: &ForcingFit) -> String {
-    format!(
-        "best fn {:.3} noise {:.3} {:?} scale {:.4} meas {:.3} bins {} var {:.4} dchi0 {:.2}\n{:?}",
-        f.best_fn_n,
-        f.noise_force_rms_n,
-        f.noise_interval_n,
-        f.rate_scale,
-        f.meas_noise_rms_nm,
-        f.bins,
-        f.residual_var,
-        f.delta_chi2_zero_fn,
-        f.forcing
-    )
-}
-
-#[allow(dead_code)]
-fn unused(_: &[CauseEffect], _: RunEffects, _: Term) {
-    let _ = (
-        attribute_difference,
-        counterfactual_effect,
-        shared_forcing,
-        vibration_effects,
+    eprintln!(
+        "{bonnet} (zeta {}): truth {} N; fitted {:.3} N, noise force {:.2} N, rate scale {:.4}, \
+         measurement noise {:.3} nm, dchi2(F=0) {:.1}\n  {:?}",
+        truth.zeta1,
+        truth.fn_n,
+        fit.best_fn_n,
+        fit.noise_force_rms_n,
+        fit.rate_scale,
+        fit.meas_noise_rms_nm,
+        fit.delta_chi2_zero_fn,
+        fit.forcing
     );
+    Fitted { model, fit, m }
+}
+
+const REMOVE: [Term; 2] = [Term::Piston, Term::Tilt];
+
+fn rms(s: &Surface) -> f64 {
+    let (r, _) = bonnetlab_surface::remove_terms(s, &REMOVE).unwrap();
+    bonnetlab_surface::height_stats(&r).unwrap().rms_nm
+}
+
+/// The run's measured σ1 and CR(RMS) with the coupling mechanisms' effects and `extra` causes.
+fn effects(name: &str, f: &Fitted, extra: Vec<CauseEffect>) -> RunEffects {
+    let mut causes = vibration_effects(&f.model, &f.fit, &f.m.before, &f.m.after, &REMOVE).unwrap();
+    causes.extend(extra);
+    let sigma1 = bonnetlab_spectrum::ripple(&f.m.after, PITCH, &Default::default())
+        .unwrap()
+        .sigma1_nm;
+    let cr = (rms(&f.m.before) - rms(&f.m.after)) / rms(&f.m.before);
+    for c in &causes {
+        eprintln!(
+            "  {name} {:<16} d_sigma1 {:+.4} ± {:.4} nm, d_cr {:+.5} ± {:.5}",
+            c.cause, c.sigma1_nm, c.sigma1_sd_nm, c.cr_rms, c.cr_rms_sd
+        );
+    }
+    eprintln!("  {name}: sigma1 {sigma1:.4} nm, CR(RMS) {cr:.5}");
+    RunEffects {
+        name: name.into(),
+        sigma1_nm: sigma1,
+        cr_rms: cr,
+        causes,
+    }
+}
+
+const VIBRATION: [&str; 4] = ["normal_offset", "lateral_jitter", "envelope", "interaction"];
+
+fn vibration_share(d: &Difference) -> f64 {
+    d.causes
+        .iter()
+        .filter(|c| VIBRATION.contains(&c.cause.as_str()))
+        .map(|c| c.share_of_sigma1_difference)
+        .sum()
+}
+
+fn within(x: f64, truth: f64, tol: f64) -> bool {
+    (x - truth).abs() <= tol * truth
+}
+
+/// Two runs of the same bonnet, forcing and path (fn 5 N at the x2 resonance, 30 mm/s feed so the
+/// spindle imprint along the scan, 9.3 Hz / 30 mm/s = 0.31 /mm, passes the 1 mm-sigma spot);
+/// the only difference is the robot damping (ζ 0.05 vs 0.1075 = 0.05 + η/2). A third run with the
+/// suppression bonnet (same added damping plus its series compliance) joins the shared fit.
+///
+/// Measured (this seed set, fn 5 N true): fitted 5.04 N (ζ 0.05; 95 % interval [4.71, 5.40]),
+/// 5.14 N (ζ 0.1075; [4.78, 5.53]), 5.17 N (suppression bonnet; [4.77, 5.61]); end-of-robot
+/// amplitude 0.139 mm vs 0.066 mm; one shared forcing 5.11 N fits all three (Δχ² = 0.15 on 4 dof,
+/// p = 0.997). σ1 (after map) B − A = +0.149 nm (the rectified offset swing widens the mean spot
+/// and lowers the ripple of the less damped run); shares: normal_offset 0.949, all vibration
+/// mechanisms 0.945, unexplained 0.055. The broadband level (0.5 N true) is not resolved here:
+/// fitted 0 N with a 95 % interval reaching above 1 N, which must contain the truth.
+#[test]
+fn damping_pair_forcing_within_30_percent_and_difference_attributed_to_vibration() {
+    let t = tif(1.0);
+    let a = run(&params(5.0, ZETA), Bonnet::Original, &t, &t);
+    let b = run(&params(5.0, ZETA_DAMPED), Bonnet::Original, &t, &t);
+    let c = run(&params(5.0, ZETA), Bonnet::Suppression, &t, &t);
+    for f in [&a, &b, &c] {
+        let v = &f.fit.forcing;
+        assert!(v.constrained, "{v:?}");
+        let fitted = v.fn_n.unwrap();
+        assert!(within(fitted, 5.0, 0.3), "fitted {fitted} N vs 5 N");
+        let [lo, hi] = v.interval_n.unwrap();
+        assert!(
+            lo <= 5.0 && 5.0 <= hi,
+            "95 % interval [{lo}, {hi}] misses 5 N"
+        );
+        assert!(v.upper_bound_n.is_none() && v.end_amplitude_mm.unwrap() > 0.0);
+        let [nlo, nhi] = f.fit.noise_interval_n.expect("broadband interval");
+        assert!(
+            nlo <= 0.5 && 0.5 <= nhi,
+            "broadband [{nlo}, {nhi}] misses 0.5 N"
+        );
+    }
+    // More damping, less end-of-robot motion at the same forcing.
+    assert!(
+        b.fit.forcing.end_amplitude_mm.unwrap() < 0.7 * a.fit.forcing.end_amplitude_mm.unwrap()
+    );
+
+    let sh = shared_forcing(&[&a.fit, &b.fit, &c.fit]).unwrap();
+    eprintln!("shared: {}", sh.reason);
+    assert!(sh.consistent && sh.plausible, "{}", sh.reason);
+    assert!(within(sh.forcing[0].fn_n.unwrap(), 5.0, 0.3));
+
+    let ea = effects("A", &a, vec![]);
+    let eb = effects("B", &b, vec![]);
+    let d = attribute_difference(&ea, &eb);
+    eprintln!("{d:#?}");
+    let vib = vibration_share(&d);
+    eprintln!("vibration share of the sigma1 difference: {vib:.3}");
+    assert!(
+        d.sigma1_difference_nm.abs() > 0.05,
+        "{}",
+        d.sigma1_difference_nm
+    );
+    assert!(VIBRATION.contains(&d.causes[0].cause.as_str()) && d.causes[0].significant);
+    assert!((0.7..=1.3).contains(&vib), "vibration share {vib}");
+    let sum: f64 = d.causes.iter().map(|c| c.share_of_sigma1_difference).sum();
+    assert!((sum + d.unexplained_share_of_sigma1_difference - 1.0).abs() < 1e-12);
+}
+
+/// Same bonnet, same vibration (fn 5 N), but run B's working spot is 15 % wider (same volume
+/// rate). The lead's wiring is played here: B's forcing is fitted on the calibrated (wider) TIF
+/// and the calibrated `tif_scale` effect is the counterfactual with the nominal TIF's removal at
+/// the fitted forcing, SD from a scale uncertainty of 0.02.
+///
+/// Measured: B's fitted forcing 5.05 N (95 % [4.69, 5.44]); σ1 B − A = −8.04 nm; shares:
+/// tif_scale 1.010 (significant), vibration mechanisms −0.030, unexplained 0.019.
+#[test]
+fn wider_spot_pair_gives_vibration_less_than_10_percent() {
+    let t = tif(1.0);
+    let wide = tif(1.15);
+    let a = run(&params(5.0, ZETA), Bonnet::Original, &t, &t);
+    let b = run(&params(5.0, ZETA), Bonnet::Original, &wide, &wide);
+    assert!(
+        within(b.fit.forcing.fn_n.unwrap(), 5.0, 0.3),
+        "{:?}",
+        b.fit.forcing
+    );
+
+    let p = path();
+    let prm = params(5.0, ZETA);
+    let nominal = ForcingModel::build(
+        &CouplingInput {
+            grid: grid(),
+            valid: None,
+            base_tif: &t,
+            path: &p,
+            params: &prm,
+            pitch_mm: Some(PITCH),
+        },
+        Bonnet::Original,
+        &opts(2),
+    )
+    .unwrap();
+    let (f, s) = (b.fit.best_fn_n, b.fit.noise_force_rms_n);
+    let added = (b.model.maps(f, s).total() - nominal.maps(f, s).total()) * b.fit.rate_scale;
+    let (ds, dc) = counterfactual_effect(&b.m.before, &b.m.after, &added, PITCH, &REMOVE).unwrap();
+    let rel = 0.02 / 0.15;
+    let tif_scale = CauseEffect {
+        cause: "tif_scale".into(),
+        sigma1_nm: ds,
+        sigma1_sd_nm: ds.abs() * rel,
+        cr_rms: dc,
+        cr_rms_sd: dc.abs() * rel,
+    };
+    let ea = effects("A", &a, vec![]);
+    let eb = effects("B", &b, vec![tif_scale]);
+    let d = attribute_difference(&ea, &eb);
+    eprintln!("{d:#?}");
+    let vib = vibration_share(&d);
+    eprintln!("vibration share of the sigma1 difference: {vib:.4}");
+    assert!(
+        d.sigma1_difference_nm < -1.0,
+        "wider spot smooths the ripple"
+    );
+    assert!(vib.abs() < 0.1, "vibration share {vib}");
+    assert_eq!(d.causes[0].cause, "tif_scale");
+    assert!(d.causes[0].significant);
+    assert!((0.8..=1.2).contains(&d.causes[0].share_of_sigma1_difference));
+}
+
+/// No spindle-harmonic forcing at all (broadband noise and ring-down only): the fit must say it
+/// cannot constrain the amplitude and give an upper bound, never a number.
+///
+/// Measured: one-sided 95 % upper bound 0.159 N (end amplitude at the bound 0.0044 mm).
+#[test]
+fn no_vibration_signal_gives_an_upper_bound() {
+    let t = tif(1.0);
+    let f = run(&params(0.0, ZETA), Bonnet::Original, &t, &t);
+    let v = &f.fit.forcing;
+    assert!(!v.constrained, "{v:?}");
+    assert!(v.fn_n.is_none() && v.interval_n.is_none());
+    let ub = v.upper_bound_n.expect("an upper bound");
+    // The 5 N forcing of the other tests would have been seen.
+    assert!(ub > 0.0 && ub < 1.0, "upper bound {ub} N");
+    assert!(v.end_amplitude_mm.unwrap() > 0.0);
+    assert!(v.reason.contains("upper bound"), "{}", v.reason);
 }

@@ -8,8 +8,10 @@
 //! `improvement_*`); a cause's share is `(effect_B − effect_A) / (value_B − value_A)`, so a cause
 //! present with the same strength in both runs gets no share and a cause acting against the
 //! difference gets a negative one. The unexplained share is 1 − Σ shares (σ1): non-additivity of
-//! the causes, noise, and whatever no cause models. A cause is `significant` when its effect
-//! difference exceeds 1.96 times its standard deviation (the two runs' SDs in quadrature).
+//! the causes, noise, and whatever no cause models. A cause is `significant` when, for σ1 or for
+//! CR(RMS), its effect difference exceeds 1.96 times its standard deviation (the two runs' SDs in
+//! quadrature) *and* its share is at least [`MATERIAL_SHARE`] (a precisely known but negligible
+//! part of the difference is not reported as significant).
 //! Causes are sorted by |share of the σ1 difference|, largest first.
 
 use super::fit::ForcingFit;
@@ -20,6 +22,9 @@ use bonnetlab_spectrum::{ripple, PsdOptions};
 use bonnetlab_surface::{height_stats, remove_terms, Surface, Term};
 use ndarray::Array2;
 use serde::Serialize;
+
+/// Smallest share of a difference a cause must have to be called significant.
+pub const MATERIAL_SHARE: f64 = 0.05;
 
 /// One cause's effect on one run (effect = value with the cause − value without it).
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -96,12 +101,15 @@ pub fn attribute_difference(a: &RunEffects, b: &RunEffects) -> Difference {
             let d_c = cb - ca;
             let sd_s = (sda * sda + sdb * sdb).sqrt();
             let sd_c = (cda * cda + cdb * cdb).sqrt();
+            let (sh_s, sh_c) = (share(d_s, ds), share(d_c, dc));
             DifferenceCause {
                 cause: n.to_string(),
-                share_of_sigma1_difference: share(d_s, ds),
-                share_of_cr_rms_difference: share(d_c, dc),
-                significant: (d_s != 0.0 && d_s.abs() > 1.96 * sd_s)
-                    || (d_c != 0.0 && d_c.abs() > 1.96 * sd_c),
+                share_of_sigma1_difference: sh_s,
+                share_of_cr_rms_difference: sh_c,
+                significant: (d_s != 0.0
+                    && d_s.abs() > 1.96 * sd_s
+                    && sh_s.abs() >= MATERIAL_SHARE)
+                    || (d_c != 0.0 && d_c.abs() > 1.96 * sd_c && sh_c.abs() >= MATERIAL_SHARE),
             }
         })
         .collect();
