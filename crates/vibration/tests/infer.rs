@@ -8,7 +8,9 @@ use bonnetlab_process::tif::GaussianTif;
 use bonnetlab_process::{Grid, PathLog};
 use bonnetlab_surface::rng::Rng;
 use bonnetlab_surface::{Surface, Term};
-use bonnetlab_vibration::coupling::{direct_removal, CouplingInput, CouplingOptions};
+use bonnetlab_vibration::coupling::{
+    direct_removal, fast_maps, predict, CouplingInput, CouplingOptions,
+};
 use bonnetlab_vibration::infer::{
     attribute_difference, counterfactual_effect, infer_forcing, shared_forcing, vibration_effects,
     CauseEffect, Difference, ForcingFit, ForcingModel, InferOptions, RunEffects,
@@ -340,4 +342,57 @@ fn no_vibration_signal_gives_an_upper_bound() {
     assert!(ub > 0.0 && ub < 1.0, "upper bound {ub} N");
     assert!(v.end_amplitude_mm.unwrap() > 0.0);
     assert!(v.reason.contains("upper bound"), "{}", v.reason);
+}
+
+/// The forcing polynomial is exact: at an arbitrary forcing it reproduces a fresh fast coupling
+/// run map for map, and its `predicted` matches the coupling's own `predict` at that forcing.
+#[test]
+fn forcing_polynomial_reproduces_the_coupling_at_any_forcing() {
+    let t = tif(1.0);
+    let p = path();
+    let prm = VibrationParams {
+        noise_force_rms_n: 0.8,
+        ..params(3.7, ZETA)
+    };
+    let input = CouplingInput {
+        grid: grid(),
+        valid: None,
+        base_tif: &t,
+        path: &p,
+        params: &prm,
+        pitch_mm: Some(PITCH),
+    };
+    for bonnet in Bonnet::ALL {
+        let model = ForcingModel::build(&input, bonnet, &opts(2)).unwrap();
+        let poly = model.maps(3.7, 0.8);
+        let fresh = fast_maps(&input, bonnet, &opts(2)).unwrap();
+        let scale = fresh.total().iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for name in ["normal_offset", "lateral_jitter", "envelope", "interaction"] {
+            let (a, b) = (poly.by_name(name).unwrap(), fresh.by_name(name).unwrap());
+            let err = (a - b).iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let size = b.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            eprintln!("{bonnet} {name}: max |poly - fresh| {err:.3e} nm of {size:.3e} nm");
+            assert!(size > 0.0 && err <= 1e-9 * scale, "{name}: {err} of {size}");
+        }
+        let band = CouplingOptions::default().msf_band_per_mm;
+        let pred = model.predicted(&input, 3.7, 0.8, 1.0, band, None).unwrap();
+        let reference = predict(&input, bonnet, &opts(2)).unwrap();
+        let s1 = pred.sigma1_nm.unwrap();
+        let r1 = reference.ripple_sigma1_nm.unwrap();
+        assert!((s1 - r1).abs() <= 1e-9 * r1, "{s1} vs {r1}");
+        assert!(
+            (pred.msf_rms_nm - reference.removal_msf_band_rms_nm).abs()
+                <= 1e-9 * reference.removal_msf_band_rms_nm
+        );
+        for (a, b) in pred.mechanisms.iter().zip(&reference.mechanisms) {
+            assert_eq!(a.name, b.name);
+            assert!(
+                (a.share - b.share).abs() < 1e-6,
+                "{} {} {}",
+                a.name,
+                a.share,
+                b.share
+            );
+        }
+    }
 }

@@ -177,8 +177,9 @@ pub fn counterfactual_effect(
 
 /// The coupling mechanisms' effects on a measured run at its fitted forcing (rate scale
 /// applied): for each mechanism, the counterfactual without that mechanism's removal. The SD
-/// is half the spread of the effect between the ends of the 95 % interval of `fn_n` (or
-/// between the best fit and the upper bound) divided by 1.96.
+/// is half the spread of the effect between the ends of the 95 % interval of `fn_n` divided by
+/// 1.96; when the forcing is not constrained the range is zero to the upper bound (or to the
+/// searched maximum), so an unconstrained forcing cannot make a mechanism significant.
 pub fn vibration_effects(
     model: &ForcingModel,
     fit: &ForcingFit,
@@ -202,12 +203,14 @@ pub fn vibration_effects(
             })
             .collect()
     };
-    let best = fit.forcing.fn_n.unwrap_or(fit.best_fn_n);
+    let grid_max = *fit.fn_grid_n.last().unwrap_or(&fit.best_fn_n);
     let (lo, hi) = match (fit.forcing.interval_n, fit.forcing.upper_bound_n) {
         (Some([l, h]), _) => (l, h),
-        (None, Some(u)) => (best.min(u), u),
-        (None, None) => (best, *fit.fn_grid_n.last().unwrap_or(&best)),
+        // Not constrained: anything from zero to the bound (or the searched range) is allowed.
+        (None, Some(u)) => (0.0, u),
+        (None, None) => (0.0, grid_max),
     };
+    let best = fit.forcing.fn_n.unwrap_or(fit.best_fn_n).clamp(lo, hi);
     let mid = at(best)?;
     let e_lo = at(lo)?;
     let e_hi = at(hi)?;

@@ -28,11 +28,15 @@ pub use fit::{
     SpectralModel, VibrationForcing,
 };
 
-use crate::coupling::{fast_maps, CouplingInput, CouplingOptions, MechanismMaps};
+use crate::coupling::predict::{msf_band_rms_y, MechanismResult};
+use crate::coupling::{fast_maps, CouplingInput, CouplingOptions, MechanismMaps, Mechanisms};
 use crate::error::VibrationError;
 use crate::params::{Bonnet, VibrationParams};
 use bonnetlab_process::Grid;
+use bonnetlab_spectrum::{ripple, PsdOptions};
+use bonnetlab_surface::Surface;
 use ndarray::Array2;
+use serde::Serialize;
 
 /// Number of monomials of the forcing polynomial.
 pub const N_MONO: usize = 6;
@@ -49,6 +53,22 @@ pub fn monomials(fn_n: f64, noise_n: f64) -> [f64; N_MONO] {
     ]
 }
 
+/// The `predicted` object of `compare`'s JSON at a given forcing (shared/spec/interfaces.md).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Predicted {
+    /// σ1 at 1/pitch along Y, nm: of the predicted after map (before − c · removal) when a
+    /// before map is given, else of the predicted removal. None without a pitch.
+    pub sigma1_nm: Option<f64>,
+    /// MSF band RMS along Y (the coupling's band) of the same map, nm.
+    pub msf_rms_nm: f64,
+    /// Each mechanism's removal contribution: MSF band RMS along Y and band-power share.
+    pub mechanisms: Vec<MechanismResult>,
+    /// The forcing and rate scale the prediction is made at.
+    pub fn_n: f64,
+    pub noise_force_rms_n: f64,
+    pub rate_scale: f64,
+}
+
 /// The coupling's removal prediction for one run and bonnet as a polynomial in the forcing.
 #[derive(Debug, Clone)]
 pub struct ForcingModel {
@@ -57,6 +77,8 @@ pub struct ForcingModel {
     /// The run's vibration parameters (their `fn_n` and `noise_force_rms_n` are not used).
     pub params: VibrationParams,
     pub pitch_mm: Option<f64>,
+    /// The mechanism switches of the coupling runs.
+    pub mechanisms: Mechanisms,
     /// Coefficient maps (nm) of the monomials, per mechanism.
     coef: Vec<MechanismMaps>,
 }
@@ -125,6 +147,7 @@ impl ForcingModel {
             bonnet,
             params: input.params.clone(),
             pitch_mm: input.pitch_mm,
+            mechanisms: opts.mechanisms,
             coef,
         })
     }
@@ -147,5 +170,87 @@ impl ForcingModel {
             noise_force_rms_n: noise_n,
             ..self.params.clone()
         }
+    }
+
+    /// The prediction at forcing (`fn_n`, `noise_n`) N and removal-rate scale `rate_scale`
+    /// (1 for the recipe's rate; a fit's `rate_scale` to compare with that run). `input` gives
+    /// the mask (its `valid`) and grid; `band` is the MSF band along Y, cycles/mm.
+    pub fn predicted(
+        &self,
+        input: &CouplingInput<'_>,
+        fn_n: f64,
+        noise_n: f64,
+        rate_scale: f64,
+        band: (f64, f64),
+        before: Option<&Surface>,
+    ) -> Result<Predicted, VibrationError> {
+        let maps = self.maps(fn_n, noise_n);
+        let removal = maps.total() * rate_scale;
+        let map = match before {
+            Some(b) => {
+                if b.dim() != removal.dim() {
+                    return Err(VibrationError::InvalidArgument(format!(
+                        "before map is {:?}, the model grid {:?}",
+                        b.dim(),
+                        removal.dim()
+                    )));
+                }
+                b.heights_nm() - &removal
+            }
+            None => removal,
+        };
+        let valid = match (before, input.valid) {
+            (Some(b), _) => b.valid().clone(),
+            (None, Some(v)) => v.clone(),
+            (None, None) => Array2::from_elem(map.dim(), true),
+        };
+        let sigma1_nm = match self.pitch_mm {
+            Some(p) => {
+                let s = Surface::with_mask(
+                    map.clone(),
+                    valid.clone(),
+                    Some(self.grid.dx_mm),
+                    Some(self.grid.dy_mm),
+                )
+                .map_err(|e| VibrationError::InvalidArgument(e.to_string()))?;
+                Some(
+                    ripple(&s, p, &PsdOptions::default())
+                        .map_err(|e| VibrationError::InvalidArgument(e.to_string()))?
+                        .sigma1_nm,
+                )
+            }
+            None => None,
+        };
+        let inp = CouplingInput {
+            valid: Some(&valid),
+            ..*input
+        };
+        let mut mechanisms = Vec::new();
+        for name in Mechanisms::NAMES
+            .iter()
+            .chain(std::iter::once(&"interaction"))
+        {
+            let m = maps.by_name(name).unwrap_or(&maps.interaction) * rate_scale;
+            mechanisms.push(MechanismResult {
+                name: name.to_string(),
+                enabled: *name == "interaction" || self.mechanisms.is_on(name),
+                msf_band_rms_nm: msf_band_rms_y(&inp, &m, band)?,
+                share: 0.0,
+            });
+        }
+        let power: f64 = mechanisms.iter().map(|m| m.msf_band_rms_nm.powi(2)).sum();
+        if power > 0.0 {
+            for m in &mut mechanisms {
+                m.share = m.msf_band_rms_nm.powi(2) / power;
+            }
+        }
+        Ok(Predicted {
+            sigma1_nm,
+            msf_rms_nm: msf_band_rms_y(&inp, &map, band)?,
+            mechanisms,
+            fn_n,
+            noise_force_rms_n: noise_n,
+            rate_scale,
+        })
     }
 }
