@@ -123,36 +123,37 @@ impl SpectralModel {
         for ck in &c {
             diag.push(psd_pair(&surf(ck.clone())?)?);
         }
-        let nx = diag[0].0.len();
-        let ny = diag[0].1.len();
-        let mut qx = vec![[0.0; N_MONO * N_MONO]; nx];
-        let mut qy = vec![[0.0; N_MONO * N_MONO]; ny];
-        for k in 0..N_MONO {
-            for b in 0..nx {
-                qx[b][k * N_MONO + k] = diag[k].0.psd_nm2_mm[b];
+        let mut qx = vec![[0.0; N_MONO * N_MONO]; diag[0].0.len()];
+        let mut qy = vec![[0.0; N_MONO * N_MONO]; diag[0].1.len()];
+        // Diagonal from PSD[C_k]; off-diagonal by polarisation from PSD[C_k + C_l].
+        let put = |q: &mut [[f64; N_MONO * N_MONO]],
+                   k: usize,
+                   l: usize,
+                   sum: &Psd1d,
+                   pk: &Psd1d,
+                   pl: &Psd1d| {
+            for (b, qb) in q.iter_mut().enumerate() {
+                let v = 0.5 * (sum.psd_nm2_mm[b] - pk.psd_nm2_mm[b] - pl.psd_nm2_mm[b]);
+                qb[k * N_MONO + l] = v;
+                qb[l * N_MONO + k] = v;
             }
-            for b in 0..ny {
-                qy[b][k * N_MONO + k] = diag[k].1.psd_nm2_mm[b];
+        };
+        for k in 0..N_MONO {
+            for (b, qb) in qx.iter_mut().enumerate() {
+                qb[k * N_MONO + k] = diag[k].0.psd_nm2_mm[b];
+            }
+            for (b, qb) in qy.iter_mut().enumerate() {
+                qb[k * N_MONO + k] = diag[k].1.psd_nm2_mm[b];
             }
             for l in k + 1..N_MONO {
                 let (px, py) = psd_pair(&surf(&c[k] + &c[l])?)?;
-                for b in 0..nx {
-                    let v =
-                        0.5 * (px.psd_nm2_mm[b] - qx[b][k * N_MONO + k] - diag[l].0.psd_nm2_mm[b]);
-                    qx[b][k * N_MONO + l] = v;
-                    qx[b][l * N_MONO + k] = v;
-                }
-                for b in 0..ny {
-                    let v =
-                        0.5 * (py.psd_nm2_mm[b] - qy[b][k * N_MONO + k] - diag[l].1.psd_nm2_mm[b]);
-                    qy[b][k * N_MONO + l] = v;
-                    qy[b][l * N_MONO + k] = v;
-                }
+                put(&mut qx, k, l, &px, &diag[k].0, &diag[l].0);
+                put(&mut qy, k, l, &py, &diag[k].1, &diag[l].1);
             }
         }
         // White-noise level: the crate's PSD of seeded unit-variance noise on the same mask,
         // averaged over the unbiased bins (flat in expectation).
-        let mut rng = Rng::new(0x5eed_0f_0153);
+        let mut rng = Rng::new(0x5eed_0f01_5300);
         let noise = Array2::from_shape_fn((g.rows, g.cols), |_| rng.normal());
         let (wx, wy) = psd_pair(&surf(noise)?)?;
         let level = |p: &Psd1d| {
