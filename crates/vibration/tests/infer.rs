@@ -210,8 +210,8 @@ fn within(x: f64, truth: f64, tol: f64) -> bool {
 ///
 /// Measured (this seed set, fn 5 N true): fitted 5.04 N (ζ 0.05; 95 % interval [4.71, 5.40]),
 /// 5.14 N (ζ 0.1075; [4.78, 5.53]), 5.17 N (suppression bonnet; [4.77, 5.61]); end-of-robot
-/// amplitude 0.139 mm vs 0.066 mm; one shared forcing 5.11 N fits all three (Δχ² = 0.15 on 4 dof,
-/// p = 0.997). σ1 (after map) B − A = +0.149 nm (the rectified offset swing widens the mean spot
+/// amplitude 0.139 mm vs 0.066 mm; one shared forcing 5.11 N fits all three (Δχ² = 0.14 on 4 dof,
+/// p = 0.998). σ1 (after map) B − A = +0.149 nm (the rectified offset swing widens the mean spot
 /// and lowers the ripple of the less damped run); shares: normal_offset 0.949, all vibration
 /// mechanisms 0.945, unexplained 0.055. The broadband level (0.5 N true) is not resolved here:
 /// fitted 0 N with a 95 % interval reaching above 1 N, which must contain the truth.
@@ -329,7 +329,7 @@ fn wider_spot_pair_gives_vibration_less_than_10_percent() {
 /// No spindle-harmonic forcing at all (broadband noise and ring-down only): the fit must say it
 /// cannot constrain the amplitude and give an upper bound, never a number.
 ///
-/// Measured: one-sided 95 % upper bound 0.159 N (end amplitude at the bound 0.0044 mm).
+/// Measured: one-sided 95 % upper bound 0.158 N (end amplitude at the bound 0.0044 mm).
 #[test]
 fn no_vibration_signal_gives_an_upper_bound() {
     let t = tif(1.0);
