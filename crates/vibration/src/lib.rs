@@ -7,6 +7,7 @@
 
 pub mod coupling;
 pub mod error;
+pub mod infer;
 pub mod modal;
 pub mod params;
 pub mod response;
