@@ -2,27 +2,28 @@
 //! options, the trade-off and feed outputs, and one-line errors with exit code 2 on bad input
 //! (unknown keys with the nearest valid one, TOML syntax with the parser's cause).
 
-use std::path::{Path, PathBuf};
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
+use std::path::PathBuf;
 use std::process::Command;
+
+use shared_data::data_file;
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
 }
 
-/// A public case file; panics with instructions when the shared data is missing.
+/// A public case file (panics with instructions when the shared data is missing).
 fn case(name: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/dwell")
-        .join(name);
-    assert!(
-        p.is_file(),
-        "missing {}: check out `shared` beside the repository so that ../shared/data/dwell exists",
-        p.display()
-    );
-    p
+    data_file("dwell", name)
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn case_a_json_and_outputs() {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("dwell.json");
@@ -104,6 +105,10 @@ fn bad_case_is_a_one_line_error_with_exit_2() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn trade_off_csv_is_the_json_curve() {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("d.json");
@@ -145,6 +150,10 @@ fn trade_off_csv_is_the_json_curve() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn unknown_keys_and_syntax_errors_name_file_key_and_cause() {
     let dir = tempfile::tempdir().unwrap();
     let good = std::fs::read_to_string(case("rifta_case_a.toml")).unwrap();

@@ -5,10 +5,14 @@
 //! the feed realisation's executed residual is checked against an exact deposition of the
 //! scheduled path.
 //!
-//! The cases live in `../shared/data/dwell` beside the repository; without them these tests
-//! fail (they never pass silently).
+//! The cases live in `shared/data/dwell` (tests/common/shared_data.rs says where it is looked
+//! for): without it the build marks these tests ignored and says so; when they run they never
+//! pass without their data.
 
-use std::path::{Path, PathBuf};
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
+use shared_data::data_file;
 
 use bonnetlab::process::dwell::case::CaseProblem;
 use bonnetlab::process::dwell::feed::realise;
@@ -19,28 +23,18 @@ use bonnetlab::process::dwell::{
 use bonnetlab::process::fft::convolve_direct;
 use bonnetlab::process::removal::ExactOptions;
 
-/// A public case file; panics with instructions when the shared data is missing.
-fn case_path(name: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/dwell")
-        .join(name);
-    assert!(
-        p.is_file(),
-        "missing {}: these tests need the public dwell cases of the shared data directory \
-         (check out `shared` beside the repository so that ../shared/data/dwell exists)",
-        p.display()
-    );
-    p
-}
-
 fn load(name: &str) -> (DwellCase, CaseProblem) {
-    let c = DwellCase::load(&case_path(name)).unwrap();
+    let c = DwellCase::load(&data_file("dwell", name)).unwrap();
     let map = bonnetlab::io::read_surface(&c.surface).unwrap();
     let p = c.problem(&map).unwrap();
     (c, p)
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn case_geometry_follows_the_readme() {
     let (c, p) = load("rifta_case_a.toml");
     // TIF radius floor(10 / 2 / 0.361515) = 13 px; dwell grid = CA (43 x 527) grown by it.
@@ -66,6 +60,10 @@ fn case_geometry_follows_the_readme() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn rifta_reaches_the_targets_on_both_cases() {
     for (name, target, reference) in [
         ("rifta_case_a.toml", 0.08, "rifta_repo_script"),
@@ -110,6 +108,10 @@ fn rifta_reaches_the_targets_on_both_cases() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn iterative_is_non_negative_and_trades_residual_for_dwell() {
     let (_, p) = load("rifta_case_a.toml");
     let base = IterativeOptions {
@@ -140,6 +142,10 @@ fn reference(c: &DwellCase, entry: &str) -> (f64, f64) {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn min_dwell_beats_every_reference_on_both_axes() {
     // Case A at the default iterations; case B needs more healing to reach its noise floor.
     for (name, iterations, target_nm, budget_min, refs) in [
@@ -201,6 +207,10 @@ fn min_dwell_beats_every_reference_on_both_axes() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn realised_feed_matches_exact_deposition_of_the_schedule() {
     for (name, max_step_mm) in [
         ("rifta_case_a.toml", None),

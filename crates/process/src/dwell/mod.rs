@@ -18,6 +18,7 @@
 //! penalty).
 
 pub mod case;
+mod coarse;
 pub mod feed;
 pub mod iterative;
 pub mod min_dwell;
