@@ -11,6 +11,7 @@ pub mod error;
 pub mod fft;
 pub mod grid;
 pub mod interp;
+pub mod modulated;
 pub mod path;
 pub mod recipe;
 pub mod removal;

@@ -643,7 +643,7 @@ pub fn deposit_exact(
 }
 
 #[allow(clippy::too_many_arguments)]
-fn deposit_one(
+pub(crate) fn deposit_one(
     acc: &mut Array2<f64>,
     g: &Grid,
     field: &dyn RateField,
