@@ -1,37 +1,45 @@
 //! Generator of synthetic measured runs, independent of the calibration's fast model.
 //!
-//! A run: an analytic before surface (figure + MSF), a commanded raster path whose feed realises
-//! a dwell map derived from that surface, a measured spot (the true TIF dwelled at a point, as a
-//! noisy height map), and the after map made by exact time-domain deposition of the true TIF
-//! along the *executed* path at the *true* instantaneous rate, then misregistered, tilted,
-//! noised and given dropouts. Effects the model is not told about are injected through
-//! [`Injected`]; several are outside the calibration library's exact forms on purpose.
+//! A run: a true initial surface on a fine grid ([`field`]: a power-law random field with detail
+//! down to the pixel scale, a real measured map resampled, or smooth figure + MSF content), a
+//! raster whose feed realises a dwell map derived from that surface ([`path`]), a measured spot
+//! (the true TIF dwelled at a point, as a noisy height map), and the after map made by the
+//! process crate's exact time-domain deposition
+//! ([`bonnetlab_process::modulated::deposit_exact_modulated`], fine sub-steps, never the FFT
+//! model) of the true analytic TIF ([`true_tif`]) along the *executed* motion at the *true*
+//! instantaneous rate and spot width, then misregistered, tilted, noised and given dropouts.
+//! Effects the model is not told about are injected through [`Injected`]; several are outside
+//! the calibration library's forms on purpose.
 //!
 //! Conventions of the injected effects (what the calibration should report):
 //! - rate factors multiply: `rate(t) = rate_0 * prod(factors)`; `RateDrift`: `1 + f * tau`
 //!   (tau = run-time fraction 0..1); `RateCovariate`: `1 + c * q` with q in natural units (x, y, mm;
 //!   feed mm/s; height nm and slope nm/mm of the before surface without piston/tilt; signed
 //!   distance to the part edge mm; time s);
-//! - executed position = commanded - lag * u (u = unit travel direction) + path error;
+//! - executed position = logged - lag * u (u = unit travel direction) + path error;
 //! - registration: a feature at true position p appears in the after map at
 //!   `R(theta) (p - c) + c + (dx, dy)`, c = map centre.
+//!
+//! Random draws are seeded and split by purpose (surface, noise, dropouts, spot, per-line
+//! rates, rate map), so a run with an effect and its null twin share surface and noise.
 
-pub mod deposit;
-pub mod raster;
-pub mod surface_fn;
+pub mod field;
+pub mod path;
 pub mod true_tif;
 pub mod write;
 
+use std::path::PathBuf;
+
+use bonnetlab_process::modulated::{deposit_exact_modulated, Modulation, SubStep};
+use bonnetlab_process::removal::ExactOptions;
+use bonnetlab_process::{Grid, PathLog};
 use bonnetlab_surface::rng::Rng;
 use bonnetlab_surface::Surface;
 use ndarray::Array2;
 
 use crate::error::CalibrateError;
-use crate::grid::MapGrid;
-use crate::path::PathLog;
-use deposit::Instant;
-use raster::RasterPlan;
-use surface_fn::SurfaceFn;
+use field::TruthSurface;
+use path::RasterPlan;
 use true_tif::TrueTif;
 
 /// Shape of a periodic path error.
@@ -45,11 +53,11 @@ pub enum Waveform {
 /// What a periodic path error's phase runs with.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum WiggleCoord {
-    /// Commanded x (mm).
+    /// Logged x (mm).
     X,
-    /// Commanded y (mm).
+    /// Logged y (mm).
     Y,
-    /// Arc length along the commanded path (mm).
+    /// Arc length along the motion (mm).
     Arc,
 }
 
@@ -92,6 +100,11 @@ pub enum Injected {
         at_tau: f64,
         fraction: f64,
     },
+    /// Rate history piecewise linear in run-time fraction between equally spaced knots:
+    /// factor `1 + knots[m]` at tau = m / (n - 1) (knots[0] is normally 0).
+    RateProfile {
+        knots: Vec<f64>,
+    },
     /// A local pit in the after surface (not removal by the tool): Gaussian, depth nm.
     LocalDefect {
         x_mm: f64,
@@ -99,11 +112,65 @@ pub enum Injected {
         radius_mm: f64,
         depth_nm: f64,
     },
-    /// Constant offset of the executed spot from the commanded position.
+    /// Constant offset of the executed spot from the logged position.
     PathOffset {
         dx_mm: f64,
         dy_mm: f64,
     },
+    // ---- Outside the calibration library (never offered to its selection) ----
+    /// Rate `1 + fraction` while travelling in +x, `1 - fraction` in -x (1 otherwise).
+    DirectionRate {
+        fraction: f64,
+    },
+    /// Every raster line (by its logged y) has its own rate factor `1 + rms_fraction * N(0, 1)`.
+    LineRate {
+        rms_fraction: f64,
+    },
+    /// The working spot is wider than the measured one and grows in time: widening
+    /// `start_scale + (end_scale - start_scale) * tau`.
+    GrowingSpot {
+        start_scale: f64,
+        end_scale: f64,
+    },
+    /// Rate `1 + per_sigma * z`, z the initial height low-passed (Gaussian, `smooth_mm`) and
+    /// standardised over the part, at the logged position.
+    HeightRate {
+        per_sigma: f64,
+        smooth_mm: f64,
+    },
+    /// A smooth random rate map over the part: `1 + amplitude_fraction * m(x, y)`, m of unit RMS
+    /// with Gaussian correlation length `correlation_mm`.
+    RateMap {
+        amplitude_fraction: f64,
+        correlation_mm: f64,
+    },
+}
+
+/// The true initial surface.
+#[derive(Debug, Clone, PartialEq)]
+pub enum InitialSurface {
+    /// Smooth: figure (0.5 to 3 cycles over the part) and MSF (0.04 to 0.2 cycles/mm) bands.
+    Smooth { figure_rms_nm: f64, msf_rms_nm: f64 },
+    /// Power-law random field, ONE-SIDED 1-D PSD ~ f^-exponent, detail to the truth pixel.
+    PowerLaw { exponent: f64, rms_nm: f64 },
+    /// A real map resampled over the part, scaled to `rms_nm`, plus a power-law texture.
+    Real {
+        path: PathBuf,
+        rms_nm: f64,
+        texture_exponent: f64,
+        texture_rms_nm: f64,
+    },
+}
+
+impl InitialSurface {
+    fn scale_nm(&self) -> f64 {
+        match self {
+            InitialSurface::Smooth { figure_rms_nm, .. } => *figure_rms_nm,
+            InitialSurface::PowerLaw { rms_nm, .. } | InitialSurface::Real { rms_nm, .. } => {
+                *rms_nm
+            }
+        }
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -112,23 +179,32 @@ pub struct SynthConfig {
     pub rows: usize,
     pub cols: usize,
     pub pixel_mm: f64,
-    pub figure_rms_nm: f64,
-    pub msf_rms_nm: f64,
+    pub surface: InitialSurface,
+    /// Truth grid pixel = map pixel / this (the initial surface has detail down to it).
+    pub truth_oversample: usize,
     pub tif: TrueTif,
     pub pitch_mm: f64,
     pub feed_min_mm_per_s: f64,
     pub feed_max_mm_per_s: f64,
+    /// Path log sample rate (Hz).
     pub sample_hz: f64,
-    /// Deposition step along the executed path (mm).
+    /// Exact deposition sub-step along the motion (mm).
     pub deposit_step_mm: f64,
     pub spot_dwell_s: f64,
     pub spot_noise_nm: f64,
+    /// Pixel of the measured spot map (mm); `None`: the map pixel.
+    pub spot_pixel_mm: Option<f64>,
     /// Where the spot's dip sits in its map, (x, y) mm from the map's centre pixel (a real
     /// spot is never exactly centred).
     pub spot_offset_mm: (f64, f64),
-    /// White measurement noise RMS of each map (nm).
+    /// White measurement noise RMS of the before map (nm).
     pub noise_nm: f64,
+    /// White noise of the after map (nm); `None`: `noise_nm`.
+    pub noise_after_nm: Option<f64>,
     pub dropout_fraction: f64,
+    /// Circular dropouts in the after map: count and radius range (mm).
+    pub dropout_discs: usize,
+    pub dropout_disc_radius_mm: (f64, f64),
     /// Set-up tilt of the after map (nm across the map) and piston (nm).
     pub setup_tilt_nm: f64,
     pub setup_piston_nm: f64,
@@ -145,8 +221,11 @@ impl Default for SynthConfig {
             rows: 160,
             cols: 180,
             pixel_mm: 0.5,
-            figure_rms_nm: 40.0,
-            msf_rms_nm: 4.0,
+            surface: InitialSurface::Smooth {
+                figure_rms_nm: 40.0,
+                msf_rms_nm: 4.0,
+            },
+            truth_oversample: 2,
             tif: TrueTif::default(),
             pitch_mm: 3.0,
             feed_min_mm_per_s: 2.0,
@@ -155,9 +234,13 @@ impl Default for SynthConfig {
             deposit_step_mm: 0.1,
             spot_dwell_s: 20.0,
             spot_noise_nm: 0.3,
+            spot_pixel_mm: None,
             spot_offset_mm: (0.0, 0.0),
             noise_nm: 0.3,
+            noise_after_nm: None,
             dropout_fraction: 0.003,
+            dropout_discs: 0,
+            dropout_disc_radius_mm: (0.5, 2.0),
             setup_tilt_nm: 15.0,
             setup_piston_nm: 7.0,
             aperture_diameter_mm: None,
@@ -190,6 +273,12 @@ impl SynthConfig {
             ..SynthConfig::default()
         }
     }
+
+    /// White-noise floor of the removal (before - after): the two maps' noise in quadrature.
+    pub fn true_noise_floor_nm(&self) -> f64 {
+        self.noise_nm
+            .hypot(self.noise_after_nm.unwrap_or(self.noise_nm))
+    }
 }
 
 /// A generated run.
@@ -199,51 +288,20 @@ pub struct SynthRun {
     pub after: Surface,
     pub spot: Surface,
     pub spot_dwell_s: f64,
+    /// The path log (what the calibration is given).
     pub path: PathLog,
+    /// The motion the tool made (before any injected displacement).
+    pub motion: PathLog,
     pub pitch_mm: f64,
-    /// The removal actually deposited (nm, true frame, no noise) for checks.
+    /// The removal actually deposited (nm, true frame, map grid, no noise) for checks.
     pub true_removal_nm: Array2<f64>,
+    /// White-noise floor of before - after (nm).
+    pub true_noise_floor_nm: f64,
 }
 
-/// Per-commanded-instant covariates the injected rate effects can depend on.
-struct Covariates<'a> {
-    surf: &'a SurfaceFn,
-    plane: (f64, f64, f64),
-    part: (f64, f64, f64, f64),
-}
-
-impl Covariates<'_> {
-    fn value(&self, name: &str, t: f64, x: f64, y: f64, feed: f64) -> Result<f64, CalibrateError> {
-        Ok(match name {
-            "time" => t,
-            "x" => x,
-            "y" => y,
-            "feed" => feed,
-            "height" => {
-                self.surf.value(x, y) - (self.plane.0 + self.plane.1 * x + self.plane.2 * y)
-            }
-            "slope" => {
-                let (gx, gy) = self.surf.gradient(x, y);
-                (gx - self.plane.1).hypot(gy - self.plane.2)
-            }
-            "edge_distance" => {
-                let (x0, x1, y0, y1) = self.part;
-                let inside = x >= x0 && x <= x1 && y >= y0 && y <= y1;
-                if inside {
-                    (x - x0).min(x1 - x).min(y - y0).min(y1 - y)
-                } else {
-                    let ddx = (x0 - x).max(0.0).max(x - x1);
-                    let ddy = (y0 - y).max(0.0).max(y - y1);
-                    -ddx.hypot(ddy)
-                }
-            }
-            other => {
-                return Err(CalibrateError::InvalidInput(format!(
-                    "unknown covariate '{other}'"
-                )))
-            }
-        })
-    }
+/// Independent random streams of one run.
+fn stream(seed: u64, purpose: u64) -> Rng {
+    Rng::new(seed ^ purpose.wrapping_mul(0x9E37_79B9_7F4A_7C15))
 }
 
 fn wave(w: Waveform, phase: f64) -> f64 {
@@ -263,9 +321,12 @@ fn wave(w: Waveform, phase: f64) -> f64 {
     }
 }
 
-/// Least-squares plane (piston, tilt) of the surface function over the grid.
-fn plane_fit(f: &SurfaceFn, g: &MapGrid) -> (f64, f64, f64) {
-    let (cx, cy) = g.centre_mm();
+/// Least-squares plane (piston, x slope, y slope) of the truth over the map grid.
+fn plane_fit(f: &TruthSurface, g: &Grid) -> (f64, f64, f64) {
+    let (cx, cy) = (
+        0.5 * (g.x_mm(0) + g.x_mm(g.cols - 1)),
+        0.5 * (g.y_mm(0) + g.y_mm(g.rows - 1)),
+    );
     let (mut sz, mut sxz, mut syz, mut sxx, mut syy, mut n) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for i in 0..g.rows {
         for j in 0..g.cols {
@@ -283,190 +344,243 @@ fn plane_fit(f: &SurfaceFn, g: &MapGrid) -> (f64, f64, f64) {
     (sz / n - a * cx - b * cy, a, b)
 }
 
-/// Catmull-Rom bicubic sample of a grid map at fractional pixel (fi, fj), clamped.
-fn bicubic(a: &Array2<f64>, fi: f64, fj: f64) -> f64 {
-    let (r, c) = a.dim();
-    let (i0, j0) = (fi.floor() as isize, fj.floor() as isize);
-    let (ti, tj) = (fi - i0 as f64, fj - j0 as f64);
-    let w = |t: f64| -> [f64; 4] {
-        [
-            0.5 * (-t * t * t + 2.0 * t * t - t),
-            0.5 * (3.0 * t * t * t - 5.0 * t * t + 2.0),
-            0.5 * (-3.0 * t * t * t + 4.0 * t * t + t),
-            0.5 * (t * t * t - t * t),
-        ]
-    };
-    let (wi, wj) = (w(ti), w(tj));
-    let mut s = 0.0;
-    for (di, wa) in wi.iter().enumerate() {
-        let ii = (i0 - 1 + di as isize).clamp(0, r as isize - 1) as usize;
-        for (dj, wb) in wj.iter().enumerate() {
-            let jj = (j0 - 1 + dj as isize).clamp(0, c as isize - 1) as usize;
-            s += wa * wb * a[(ii, jj)];
+/// Standardises a field over the map's part (mean 0, RMS 1 over the map grid's extent).
+fn standardised(f: TruthSurface, g: &Grid) -> TruthSurface {
+    let (mut s, mut s2, mut n) = (0.0, 0.0, 0.0);
+    for i in 0..g.rows {
+        for j in 0..g.cols {
+            let v = f.value(g.x_mm(j), g.y_mm(i));
+            s += v;
+            s2 += v * v;
+            n += 1.0;
         }
     }
-    s
+    let m = s / n;
+    let sd = (s2 / n - m * m).max(1e-300).sqrt();
+    TruthSurface {
+        heights_nm: f.heights_nm.mapv(|v| (v - m) / sd),
+        grid: f.grid,
+    }
+}
+
+/// Everything the per-instant modulation needs besides the effect list.
+struct Context<'a> {
+    t0: f64,
+    t1: f64,
+    truth: &'a TruthSurface,
+    plane: (f64, f64, f64),
+    part: (f64, f64, f64, f64),
+    /// Cumulative arc length of the motion at each sample.
+    arc: Vec<f64>,
+    first_line_mm: f64,
+    pitch_mm: f64,
+    line_factors: Vec<f64>,
+    height_z: Option<TruthSurface>,
+    rate_map: Option<TruthSurface>,
+}
+
+const COVARIATES: [&str; 7] = ["time", "x", "y", "feed", "height", "slope", "edge_distance"];
+
+impl Context<'_> {
+    fn covariate(&self, name: &str, s: &SubStep) -> f64 {
+        let (x, y) = (s.x_mm, s.y_mm);
+        match name {
+            "time" => s.t_s - self.t0,
+            "x" => x,
+            "y" => y,
+            "feed" => s.vx_mm_per_s.hypot(s.vy_mm_per_s),
+            "height" => {
+                self.truth.value(x, y) - (self.plane.0 + self.plane.1 * x + self.plane.2 * y)
+            }
+            "slope" => {
+                let (gx, gy) = self.truth.gradient(x, y);
+                (gx - self.plane.1).hypot(gy - self.plane.2)
+            }
+            "edge_distance" => {
+                let (x0, x1, y0, y1) = self.part;
+                if x >= x0 && x <= x1 && y >= y0 && y <= y1 {
+                    (x - x0).min(x1 - x).min(y - y0).min(y1 - y)
+                } else {
+                    let ddx = (x0 - x).max(0.0).max(x - x1);
+                    let ddy = (y0 - y).max(0.0).max(y - y1);
+                    -ddx.hypot(ddy)
+                }
+            }
+            _ => 0.0,
+        }
+    }
+
+    fn modulation(&self, effects: &[Injected], s: &SubStep, path: &PathLog) -> Modulation {
+        let tau = ((s.t_s - self.t0) / (self.t1 - self.t0)).clamp(0.0, 1.0);
+        let speed = s.vx_mm_per_s.hypot(s.vy_mm_per_s);
+        let (ux, uy) = if speed > 1e-9 {
+            (s.vx_mm_per_s / speed, s.vy_mm_per_s / speed)
+        } else {
+            (0.0, 0.0)
+        };
+        let mut m = Modulation::default();
+        for e in effects {
+            match e {
+                Injected::RateDrift { fraction_per_run } => m.rate *= 1.0 + fraction_per_run * tau,
+                Injected::TifScale { scale } => m.scale *= scale,
+                Injected::DirectionLag { lag_mm } => {
+                    m.dx_mm -= lag_mm * ux;
+                    m.dy_mm -= lag_mm * uy;
+                }
+                Injected::PeriodicPathError {
+                    axis_x,
+                    amplitude_mm,
+                    period_mm,
+                    phase_rad,
+                    coord,
+                    waveform,
+                } => {
+                    let q = match coord {
+                        WiggleCoord::X => s.x_mm,
+                        WiggleCoord::Y => s.y_mm,
+                        WiggleCoord::Arc => {
+                            let k = s.segment;
+                            let fr = (s.t_s - path.t_s[k]) / (path.t_s[k + 1] - path.t_s[k]);
+                            self.arc[k] + fr * (self.arc[k + 1] - self.arc[k])
+                        }
+                    };
+                    let v = amplitude_mm
+                        * wave(
+                            *waveform,
+                            2.0 * std::f64::consts::PI * q / period_mm + phase_rad,
+                        );
+                    if *axis_x {
+                        m.dx_mm += v;
+                    } else {
+                        m.dy_mm += v;
+                    }
+                }
+                Injected::RateCovariate {
+                    covariate,
+                    coefficient,
+                } => m.rate *= 1.0 + coefficient * self.covariate(covariate, s),
+                Injected::RateOscillation {
+                    amplitude_fraction,
+                    period_s,
+                } => {
+                    m.rate *= 1.0
+                        + amplitude_fraction
+                            * (2.0 * std::f64::consts::PI * (s.t_s - self.t0) / period_s).sin()
+                }
+                Injected::RateStep { at_tau, fraction } => {
+                    if tau >= *at_tau {
+                        m.rate *= 1.0 + fraction
+                    }
+                }
+                Injected::RateProfile { knots } if knots.len() >= 2 => {
+                    let x = tau * (knots.len() - 1) as f64;
+                    let j = (x.floor() as usize).min(knots.len() - 2);
+                    let f = x - j as f64;
+                    m.rate *= 1.0 + knots[j] + f * (knots[j + 1] - knots[j]);
+                }
+                Injected::PathOffset { dx_mm, dy_mm } => {
+                    m.dx_mm += dx_mm;
+                    m.dy_mm += dy_mm;
+                }
+                Injected::DirectionRate { fraction } => {
+                    if ux.abs() > 0.7 {
+                        m.rate *= 1.0 + fraction * ux.signum();
+                    }
+                }
+                Injected::LineRate { .. } => {
+                    let l = ((s.y_mm - self.first_line_mm) / self.pitch_mm).round();
+                    let l = (l.max(0.0) as usize).min(self.line_factors.len().saturating_sub(1));
+                    m.rate *= self.line_factors.get(l).copied().unwrap_or(1.0);
+                }
+                Injected::GrowingSpot {
+                    start_scale,
+                    end_scale,
+                } => m.scale *= start_scale + (end_scale - start_scale) * tau,
+                Injected::HeightRate { per_sigma, .. } => {
+                    if let Some(z) = &self.height_z {
+                        m.rate *= 1.0 + per_sigma * z.value(s.x_mm, s.y_mm);
+                    }
+                }
+                Injected::RateMap {
+                    amplitude_fraction, ..
+                } => {
+                    if let Some(r) = &self.rate_map {
+                        m.rate *= 1.0 + amplitude_fraction * r.value(s.x_mm, s.y_mm);
+                    }
+                }
+                _ => {}
+            }
+        }
+        m
+    }
+}
+
+fn perr(e: bonnetlab_process::ProcessError) -> CalibrateError {
+    CalibrateError::InvalidInput(format!("synthetic run: {e}"))
+}
+
+/// The true initial surface on the truth grid.
+fn initial_surface(
+    cfg: &SynthConfig,
+    tg: &Grid,
+    part_mm: f64,
+) -> Result<Array2<f64>, CalibrateError> {
+    let mut rng = stream(cfg.seed, 1);
+    Ok(match &cfg.surface {
+        InitialSurface::Smooth {
+            figure_rms_nm,
+            msf_rms_nm,
+        } => {
+            let mut a =
+                field::band_field(&mut rng, tg, 0.5 / part_mm, 3.0 / part_mm, *figure_rms_nm);
+            if *msf_rms_nm > 0.0 {
+                a += &field::band_field(&mut rng, tg, 0.04, 0.2, *msf_rms_nm);
+            }
+            a
+        }
+        InitialSurface::PowerLaw { exponent, rms_nm } => {
+            field::power_law(&mut rng, tg, *exponent, *rms_nm)
+        }
+        InitialSurface::Real {
+            path,
+            rms_nm,
+            texture_exponent,
+            texture_rms_nm,
+        } => {
+            let mut a = field::from_real_map(path, tg, *rms_nm)?;
+            if *texture_rms_nm > 0.0 {
+                a += &field::power_law(&mut rng, tg, *texture_exponent, *texture_rms_nm);
+            }
+            a
+        }
+    })
 }
 
 /// Generates a run.
 pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
-    if cfg.rows < 16 || cfg.cols < 16 || cfg.pixel_mm <= 0.0 || cfg.pitch_mm <= 0.0 {
+    if cfg.rows < 16 || cfg.cols < 16 || !(cfg.pixel_mm > 0.0) || !(cfg.pitch_mm > 0.0) {
         return Err(CalibrateError::InvalidInput(
             "synthetic run: grid or pitch too small".into(),
         ));
     }
-    let mut rng = Rng::new(cfg.seed);
-    let d = cfg.pixel_mm;
-    let grid = MapGrid {
-        rows: cfg.rows,
-        cols: cfg.cols,
-        dx_mm: d,
-        dy_mm: d,
-        x0_mm: 0.0,
-        y0_mm: 0.0,
-    };
-    let (wx, wy) = ((cfg.cols - 1) as f64 * d, (cfg.rows - 1) as f64 * d);
-    let surf = SurfaceFn::random(
-        &mut rng,
-        wx.max(wy),
-        cfg.figure_rms_nm,
-        cfg.msf_rms_nm,
-        (0.04, 0.2),
-    );
-    let plane = plane_fit(&surf, &grid);
-    let cov = Covariates {
-        surf: &surf,
-        plane,
-        part: (-0.5 * d, wx + 0.5 * d, -0.5 * d, wy + 0.5 * d),
-    };
-
-    // Feed from a dwell map: more dwell (slower) where the figure is high.
-    let fig_rms = cfg.figure_rms_nm.max(1e-9);
-    let (vmin, vmax) = (cfg.feed_min_mm_per_s, cfg.feed_max_mm_per_s);
-    let feed_at = |x: f64, y: f64| -> f64 {
-        let h = (surf.value(x, y) / (2.5 * fig_rms)).clamp(-1.0, 1.0); // -1..1
-        let dwell_per_area = (1.0 / (vmax * cfg.pitch_mm)) * (1.0 - (h + 1.0) / 2.0)
-            + (1.0 / (vmin * cfg.pitch_mm)) * ((h + 1.0) / 2.0);
-        1.0 / (dwell_per_area * cfg.pitch_mm)
-    };
-    let over = cfg.tif.radius_mm * 0.8;
-    let plan = RasterPlan {
-        x_min_mm: -over,
-        x_max_mm: wx + over,
-        y_min_mm: -over,
-        y_max_mm: wy + over,
-        pitch_mm: cfg.pitch_mm,
-        sample_hz: cfg.sample_hz,
-    };
-    let path = raster(&plan, feed_at);
-
-    // Executed instants.
-    let (t0, t1) = (path.t_s[0], *path.t_s.last().unwrap_or(&1.0));
-    let mut steps = Vec::new();
-    let mut arc = 0.0;
-    let mut scale = 1.0;
     for e in &cfg.effects {
-        if let Injected::TifScale { scale: s } = e {
-            scale *= s;
-        }
-    }
-    for k in 0..path.len() - 1 {
-        let (xa, ya, xb, yb) = (
-            path.x_mm[k],
-            path.y_mm[k],
-            path.x_mm[k + 1],
-            path.y_mm[k + 1],
-        );
-        let len = (xb - xa).hypot(yb - ya);
-        let dt_seg = path.t_s[k + 1] - path.t_s[k];
-        let n = ((len / cfg.deposit_step_mm).ceil() as usize).max(1);
-        let (ux, uy) = if len > 0.0 {
-            ((xb - xa) / len, (yb - ya) / len)
-        } else {
-            (0.0, 0.0)
-        };
-        let feed = len / dt_seg;
-        for m in 0..n {
-            let f = (m as f64 + 0.5) / n as f64;
-            let t = path.t_s[k] + f * dt_seg;
-            let (xc, yc) = (xa + f * (xb - xa), ya + f * (yb - ya));
-            let s_arc = arc + f * len;
-            let tau = (t - t0) / (t1 - t0);
-            let (mut x, mut y, mut rate) = (xc, yc, 1.0);
-            for e in &cfg.effects {
-                match e {
-                    Injected::RateDrift { fraction_per_run } => {
-                        rate *= 1.0 + fraction_per_run * tau
-                    }
-                    Injected::DirectionLag { lag_mm } => {
-                        x -= lag_mm * ux;
-                        y -= lag_mm * uy;
-                    }
-                    Injected::PeriodicPathError {
-                        axis_x,
-                        amplitude_mm,
-                        period_mm,
-                        phase_rad,
-                        coord,
-                        waveform,
-                    } => {
-                        let q = match coord {
-                            WiggleCoord::X => xc,
-                            WiggleCoord::Y => yc,
-                            WiggleCoord::Arc => s_arc,
-                        };
-                        let e = amplitude_mm
-                            * wave(
-                                *waveform,
-                                2.0 * std::f64::consts::PI * q / period_mm + phase_rad,
-                            );
-                        if *axis_x {
-                            x += e;
-                        } else {
-                            y += e;
-                        }
-                    }
-                    Injected::RateCovariate {
-                        covariate,
-                        coefficient,
-                    } => rate *= 1.0 + coefficient * cov.value(covariate, t - t0, xc, yc, feed)?,
-                    Injected::RateOscillation {
-                        amplitude_fraction,
-                        period_s,
-                    } => {
-                        rate *= 1.0
-                            + amplitude_fraction
-                                * (2.0 * std::f64::consts::PI * (t - t0) / period_s).sin()
-                    }
-                    Injected::RateStep { at_tau, fraction } if tau >= *at_tau => {
-                        rate *= 1.0 + fraction
-                    }
-                    Injected::PathOffset { dx_mm, dy_mm } => {
-                        x += dx_mm;
-                        y += dy_mm;
-                    }
-                    _ => {}
-                }
+        if let Injected::RateCovariate { covariate, .. } = e {
+            if !COVARIATES.contains(&covariate.as_str()) {
+                return Err(CalibrateError::InvalidInput(format!(
+                    "unknown covariate '{covariate}'"
+                )));
             }
-            steps.push(Instant {
-                x_mm: x,
-                y_mm: y,
-                dt_s: dt_seg / n as f64,
-                rate_factor: rate,
-                scale,
-            });
         }
-        arc += len;
     }
-    let removal = deposit::deposit(&grid, &cfg.tif, &steps);
+    let d = cfg.pixel_mm;
+    let grid = Grid::new(cfg.rows, cfg.cols, d, d, 0.0, 0.0).map_err(perr)?;
+    let (wx, wy) = ((cfg.cols - 1) as f64 * d, (cfg.rows - 1) as f64 * d);
+    let (cx, cy) = (0.5 * wx, 0.5 * wy);
+    let field = cfg.tif.field()?;
+    let (ext, _) = field.half_extent_mm();
 
-    // Before map: truth + its own noise and dropouts.
-    let mut before = Array2::from_shape_fn((cfg.rows, cfg.cols), |(i, j)| {
-        surf.value(grid.x_mm(j), grid.y_mm(i))
-    });
-    // After map: truth at the misregistered positions.
-    let (cx, cy) = grid.centre_mm();
-    let (mut rdx, mut rdy, mut rth) = (0.0, 0.0, 0.0);
+    // Registration (summed) and how far the after map reaches outside the part.
+    let (mut rdx, mut rdy, mut rth) = (0.0, 0.0, 0.0f64);
     for e in &cfg.effects {
         if let Injected::Registration {
             dx_mm,
@@ -479,12 +593,140 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
             rth += rotation_deg.to_radians();
         }
     }
+    let reach = rdx.hypot(rdy) + rth.abs() * cx.hypot(cy) + 2.0 * d;
+
+    // Truth grid: finer than the map, wider than the part.
+    let os = cfg.truth_oversample.max(1);
+    let td = d / os as f64;
+    let margin_mm = reach + 4.0 * d + 2.0;
+    let m_px = (margin_mm / td).ceil() as usize;
+    let tg = Grid::new(
+        (cfg.rows - 1) * os + 1 + 2 * m_px,
+        (cfg.cols - 1) * os + 1 + 2 * m_px,
+        td,
+        td,
+        -(m_px as f64) * td,
+        -(m_px as f64) * td,
+    )
+    .map_err(perr)?;
+    let truth = TruthSurface {
+        heights_nm: initial_surface(cfg, &tg, wx.max(wy))?,
+        grid: tg,
+    };
+    let plane = plane_fit(&truth, &grid);
+
+    // Dwell map on a 1 mm grid over the raster: more dwell (slower) where the low-passed
+    // surface is high.
+    let over = ext * 0.8;
+    let fig = field::smooth(&truth.heights_nm, &tg, 5.0);
+    let fig_t = TruthSurface {
+        heights_nm: fig,
+        grid: tg,
+    };
+    let fig_rms = cfg.surface.scale_nm().max(1e-9);
+    let (vmin, vmax) = (cfg.feed_min_mm_per_s, cfg.feed_max_mm_per_s);
+    let dg_pitch = 1.0;
+    let n_dx = ((wx + 2.0 * over + 4.0) / dg_pitch).ceil() as usize + 1;
+    let n_dy = ((wy + 2.0 * over + 4.0) / dg_pitch).ceil() as usize + 1;
+    let dgrid =
+        Grid::new(n_dy, n_dx, dg_pitch, dg_pitch, -over - 2.0, -over - 2.0).map_err(perr)?;
+    let dens = Array2::from_shape_fn((n_dy, n_dx), |(i, j)| {
+        let (x, y) = (dgrid.x_mm(j).clamp(0.0, wx), dgrid.y_mm(i).clamp(0.0, wy));
+        let h = ((fig_t.value(x, y) - (plane.0 + plane.1 * x + plane.2 * y)) / (2.5 * fig_rms))
+            .clamp(-1.0, 1.0);
+        (1.0 / (vmax * cfg.pitch_mm)) * (1.0 - (h + 1.0) / 2.0)
+            + (1.0 / (vmin * cfg.pitch_mm)) * ((h + 1.0) / 2.0)
+    });
+    let plan = RasterPlan {
+        x_range_mm: (-over, wx + over),
+        y_range_mm: (-over, wy + over),
+        pitch_mm: cfg.pitch_mm,
+        feed_min_mm_per_s: vmin,
+        feed_max_mm_per_s: vmax,
+        sample_hz: cfg.sample_hz,
+    };
+    let (motion, log) = path::raster_motion(&plan, &dens, &dgrid)?;
+
+    // Per-instant modulation.
+    let mut arc = vec![0.0; motion.len()];
+    for k in 1..motion.len() {
+        arc[k] = arc[k - 1]
+            + (motion.x_mm[k] - motion.x_mm[k - 1]).hypot(motion.y_mm[k] - motion.y_mm[k - 1]);
+    }
+    let n_lines = ((wy + 2.0 * over) / cfg.pitch_mm).floor() as usize + 1;
+    let mut line_rng = stream(cfg.seed, 5);
+    let line_rms = cfg
+        .effects
+        .iter()
+        .find_map(|e| match e {
+            Injected::LineRate { rms_fraction } => Some(*rms_fraction),
+            _ => None,
+        })
+        .unwrap_or(0.0);
+    let line_factors = (0..n_lines)
+        .map(|_| 1.0 + line_rms * line_rng.normal())
+        .collect();
+    let height_z = cfg.effects.iter().find_map(|e| match e {
+        Injected::HeightRate { smooth_mm, .. } => Some(standardised(
+            TruthSurface {
+                heights_nm: field::smooth(&truth.heights_nm, &tg, *smooth_mm),
+                grid: tg,
+            },
+            &grid,
+        )),
+        _ => None,
+    });
+    let rate_map = cfg.effects.iter().find_map(|e| match e {
+        Injected::RateMap { correlation_mm, .. } => Some(standardised(
+            TruthSurface {
+                heights_nm: field::smooth_random(&mut stream(cfg.seed, 6), &tg, *correlation_mm),
+                grid: tg,
+            },
+            &grid,
+        )),
+        _ => None,
+    });
+    let ctx = Context {
+        t0: motion.t_s[0],
+        t1: motion.t_s[motion.len() - 1],
+        truth: &truth,
+        plane,
+        part: (-0.5 * d, wx + 0.5 * d, -0.5 * d, wy + 0.5 * d),
+        arc,
+        first_line_mm: -over,
+        pitch_mm: cfg.pitch_mm,
+        line_factors,
+        height_z,
+        rate_map,
+    };
+
+    // Exact deposition on the map grid grown so that misregistered samples stay inside.
+    let grow = (reach / d).ceil() as usize + 3;
+    let rgrid = grid.grown(grow, grow);
+    let opts = ExactOptions {
+        max_step_mm: Some(cfg.deposit_step_mm),
+        ..ExactOptions::default()
+    };
+    let removal = deposit_exact_modulated(&motion, field.as_ref(), &rgrid, &opts, |s| {
+        ctx.modulation(&cfg.effects, s, &motion)
+    })
+    .map_err(perr)?;
+    let removal_at = |x: f64, y: f64| {
+        let (u, v) = rgrid.frac_index(x, y);
+        bonnetlab_process::interp::catmull_rom(&removal, u, v)
+    };
+
+    // Before map: truth at the map's pixel centres. After map: truth minus removal at the
+    // misregistered positions.
+    let mut before = Array2::from_shape_fn((cfg.rows, cfg.cols), |(i, j)| {
+        truth.value(grid.x_mm(j), grid.y_mm(i))
+    });
     let mut after = Array2::from_shape_fn((cfg.rows, cfg.cols), |(i, j)| {
         // after-map pixel q shows the true point p = R(-theta) (q - c - d) + c
         let (qx, qy) = (grid.x_mm(j) - cx - rdx, grid.y_mm(i) - cy - rdy);
         let (c, s) = (rth.cos(), rth.sin());
         let (px, py) = (c * qx + s * qy + cx, -s * qx + c * qy + cy);
-        let mut h = surf.value(px, py) - bicubic(&removal, py / d, px / d);
+        let mut h = truth.value(px, py) - removal_at(px, py);
         for e in &cfg.effects {
             if let Injected::LocalDefect {
                 x_mm,
@@ -501,32 +743,49 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
     });
     let mut vb = Array2::from_elem((cfg.rows, cfg.cols), true);
     let mut va = Array2::from_elem((cfg.rows, cfg.cols), true);
+    let mut noise_rng = stream(cfg.seed, 2);
+    let mut drop_rng = stream(cfg.seed, 3);
+    let noise_after = cfg.noise_after_nm.unwrap_or(cfg.noise_nm);
     for (map, valid, setup) in [(&mut before, &mut vb, false), (&mut after, &mut va, true)] {
         let (tx, ty) = if setup {
             (
-                cfg.setup_tilt_nm * (rng.uniform() - 0.5) * 2.0,
-                cfg.setup_tilt_nm * (rng.uniform() - 0.5) * 2.0,
+                cfg.setup_tilt_nm * (drop_rng.uniform() - 0.5) * 2.0,
+                cfg.setup_tilt_nm * (drop_rng.uniform() - 0.5) * 2.0,
             )
         } else {
             (0.0, 0.0)
         };
         let piston = if setup { cfg.setup_piston_nm } else { 0.0 };
+        let sigma = if setup { noise_after } else { cfg.noise_nm };
         for ((i, j), h) in map.indexed_iter_mut() {
             *h += piston
                 + tx * (grid.x_mm(j) / wx - 0.5)
                 + ty * (grid.y_mm(i) / wy - 0.5)
-                + cfg.noise_nm * rng.normal();
+                + sigma * noise_rng.normal();
         }
         // Dropouts: isolated pixels plus a few small clusters.
         let n_drop = (cfg.dropout_fraction * (cfg.rows * cfg.cols) as f64) as usize;
         for _ in 0..n_drop {
-            valid[(rng.below(cfg.rows), rng.below(cfg.cols))] = false;
+            valid[(drop_rng.below(cfg.rows), drop_rng.below(cfg.cols))] = false;
         }
         for _ in 0..3.min(n_drop) {
-            let (ci, cj) = (rng.below(cfg.rows), rng.below(cfg.cols));
+            let (ci, cj) = (drop_rng.below(cfg.rows), drop_rng.below(cfg.cols));
             for i in ci.saturating_sub(2)..(ci + 3).min(cfg.rows) {
                 for j in cj.saturating_sub(2)..(cj + 3).min(cfg.cols) {
                     valid[(i, j)] = false;
+                }
+            }
+        }
+        // Circular dropouts in the after map (dust, a fiducial, a reflection).
+        if setup {
+            let (r0, r1) = cfg.dropout_disc_radius_mm;
+            for _ in 0..cfg.dropout_discs {
+                let (x, y) = (drop_rng.uniform() * wx, drop_rng.uniform() * wy);
+                let r = r0 + (r1 - r0) * drop_rng.uniform();
+                for ((i, j), ok) in valid.indexed_iter_mut() {
+                    if (grid.x_mm(j) - x).powi(2) + (grid.y_mm(i) - y).powi(2) <= r * r {
+                        *ok = false;
+                    }
                 }
             }
         }
@@ -548,32 +807,38 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
         Ok(s)
     };
 
-    // Measured spot: odd-sized map of the (unscaled) true TIF dwelled at its centre.
+    // Measured spot: odd-sized map of the (unscaled) true TIF dwelled at its centre, point
+    // samples plus white noise.
+    let sd = cfg.spot_pixel_mm.unwrap_or(d);
     let off = cfg.spot_offset_mm.0.abs().max(cfg.spot_offset_mm.1.abs());
-    let half = ((cfg.tif.radius_mm * 1.25 + off) / d).ceil() as usize;
+    let half = ((ext * 1.25 + off) / sd).ceil() as usize;
     let n = 2 * half + 1;
+    let mut spot_rng = stream(cfg.seed, 4);
     let spot_h = Array2::from_shape_fn((n, n), |(i, j)| {
-        let (x, y) = ((j as f64 - half as f64) * d, (i as f64 - half as f64) * d);
+        let (x, y) = ((j as f64 - half as f64) * sd, (i as f64 - half as f64) * sd);
         let (ox, oy) = cfg.spot_offset_mm;
-        3.0 - cfg.spot_dwell_s * cfg.tif.rate(x - ox, y - oy, 1.0)
-            + cfg.spot_noise_nm * rng.normal()
+        3.0 - cfg.spot_dwell_s * field.rate_at_mm(x - ox, y - oy)
+            + cfg.spot_noise_nm * spot_rng.normal()
     });
-    let mut spot = Surface::new(spot_h, Some(d), Some(d))?;
+    let mut spot = Surface::new(spot_h, Some(sd), Some(sd))?;
     spot.provenance.format = "synthetic".into();
-    spot.origin_mm = (-(half as f64) * d, -(half as f64) * d);
+    spot.origin_mm = (-(half as f64) * sd, -(half as f64) * sd);
 
+    let true_removal_nm = removal
+        .slice(ndarray::s![grow..grow + cfg.rows, grow..grow + cfg.cols])
+        .to_owned();
     Ok(SynthRun {
         before: mk(before, vb, "before")?,
         after: mk(after, va, "after")?,
         spot,
         spot_dwell_s: cfg.spot_dwell_s,
-        path,
+        path: log,
+        motion,
         pitch_mm: cfg.pitch_mm,
-        true_removal_nm: removal,
+        true_removal_nm,
+        true_noise_floor_nm: cfg.true_noise_floor_nm(),
     })
 }
-
-use raster::raster;
 
 #[cfg(test)]
 mod tests {

@@ -1,42 +1,46 @@
-//! The generator's "true" tool influence function: an analytic, deliberately non-Gaussian spot
-//! (a Gaussian core with a shoulder, elliptical, with a compact smooth window), evaluated exactly
-//! at any offset. The calibration never sees it: it sees a noisy measured spot map of it.
+//! The generator's true tool influence function: one of the process crate's analytic models
+//! (a truncated Gaussian or the paper's precessing bonnet), evaluated exactly at any offset by
+//! the exact deposition. The calibration never sees it: it sees a noisy measured spot map.
 
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TrueTif {
-    pub peak_nm_per_s: f64,
-    /// Gaussian widths along x and y (mm).
-    pub sigma_x_mm: f64,
-    pub sigma_y_mm: f64,
-    /// Shoulder strength: rate * (1 + shoulder * rho^2) / norm.
-    pub shoulder: f64,
-    /// Compact support radius (mm): smooth window (1 - (r / R)^2)^2.
-    pub radius_mm: f64,
+use bonnetlab_process::tif::bonnet::BonnetTif;
+use bonnetlab_process::tif::{BonnetTifParams, GaussianTif, RateField};
+
+use crate::error::CalibrateError;
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum TrueTif {
+    Gaussian(GaussianTif),
+    Bonnet(BonnetTifParams),
 }
 
 impl Default for TrueTif {
+    /// A Gaussian of sigma 2 mm, peak 30 nm/s, truncated at 7 mm radius.
     fn default() -> Self {
-        TrueTif {
-            peak_nm_per_s: 30.0,
-            sigma_x_mm: 2.0,
-            sigma_y_mm: 1.8,
-            shoulder: 0.25,
-            radius_mm: 7.5,
-        }
+        TrueTif::Gaussian(GaussianTif {
+            sigma_mm: 2.0,
+            diameter_mm: 14.0,
+            peak_rate_nm_per_s: 30.0,
+        })
     }
 }
 
 impl TrueTif {
-    /// Rate at offset (x, y) mm from the tool centre, for a spot widened by `scale`.
-    pub fn rate(&self, x: f64, y: f64, scale: f64) -> f64 {
-        let (x, y) = (x / scale, y / scale);
-        let r2 = x * x + y * y;
-        let rr = self.radius_mm * self.radius_mm;
-        if r2 >= rr {
-            return 0.0;
-        }
-        let rho2 = (x / self.sigma_x_mm).powi(2) + (y / self.sigma_y_mm).powi(2);
-        let w = (1.0 - r2 / rr).powi(2);
-        self.peak_nm_per_s * (-0.5 * rho2).exp() * (1.0 + self.shoulder * rho2) * w
+    /// The paper's precessing bonnet (R 20 mm, h 0.6 mm, 20 deg, Hertz) with a given volume
+    /// rate (nm mm^2 / s).
+    pub fn bonnet(volume_nm_mm2_per_s: f64) -> TrueTif {
+        let mut p = BonnetTifParams::paper(1.0);
+        p.scale = bonnetlab_process::tif::RateScale::VolumeNmMm2PerS(volume_nm_mm2_per_s);
+        TrueTif::Bonnet(p)
+    }
+
+    /// The evaluable rate field.
+    pub fn field(&self) -> Result<Box<dyn RateField>, CalibrateError> {
+        let err = |e: bonnetlab_process::ProcessError| CalibrateError::InvalidInput(e.to_string());
+        Ok(match self {
+            TrueTif::Gaussian(g) => Box::new(
+                GaussianTif::new(g.sigma_mm, g.diameter_mm, g.peak_rate_nm_per_s).map_err(err)?,
+            ),
+            TrueTif::Bonnet(p) => Box::new(BonnetTif::new(p).map_err(err)?),
+        })
     }
 }
