@@ -467,10 +467,8 @@ impl Context<'_> {
                         + amplitude_fraction
                             * (2.0 * std::f64::consts::PI * (s.t_s - self.t0) / period_s).sin()
                 }
-                Injected::RateStep { at_tau, fraction } => {
-                    if tau >= *at_tau {
-                        m.rate *= 1.0 + fraction
-                    }
+                Injected::RateStep { at_tau, fraction } if tau >= *at_tau => {
+                    m.rate *= 1.0 + fraction
                 }
                 Injected::RateProfile { knots } if knots.len() >= 2 => {
                     let x = tau * (knots.len() - 1) as f64;
@@ -482,10 +480,8 @@ impl Context<'_> {
                     m.dx_mm += dx_mm;
                     m.dy_mm += dy_mm;
                 }
-                Injected::DirectionRate { fraction } => {
-                    if ux.abs() > 0.7 {
-                        m.rate *= 1.0 + fraction * ux.signum();
-                    }
+                Injected::DirectionRate { fraction } if ux.abs() > 0.7 => {
+                    m.rate *= 1.0 + fraction * ux.signum();
                 }
                 Injected::LineRate { .. } => {
                     let l = ((s.y_mm - self.first_line_mm) / self.pitch_mm).round();
@@ -558,7 +554,8 @@ fn initial_surface(
 
 /// Generates a run.
 pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
-    if cfg.rows < 16 || cfg.cols < 16 || !(cfg.pixel_mm > 0.0) || !(cfg.pitch_mm > 0.0) {
+    let positive = |v: f64| v.is_finite() && v > 0.0;
+    if cfg.rows < 16 || cfg.cols < 16 || !positive(cfg.pixel_mm) || !positive(cfg.pitch_mm) {
         return Err(CalibrateError::InvalidInput(
             "synthetic run: grid or pitch too small".into(),
         ));
