@@ -8,6 +8,9 @@ use std::os::unix::fs::FileTypeExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
 }
@@ -16,20 +19,9 @@ fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// A dwell case from ../shared; fails (never skips) when the shared data is missing.
+/// A public dwell case from shared/data (tests using it are marked as needing the data).
 fn dwell_case() -> PathBuf {
-    let p = repo().join("../shared/data/dwell/rifta_case_a.toml");
-    let p = if p.exists() {
-        p
-    } else {
-        repo().join("../../shared/data/dwell/rifta_case_a.toml")
-    };
-    assert!(
-        p.exists(),
-        "missing shared data: {} (clone ../shared beside the repository)",
-        p.display()
-    );
-    p
+    shared_data::data_file("dwell", "rifta_case_a.toml")
 }
 
 fn sample_map() -> PathBuf {
@@ -68,6 +60,7 @@ fn one_line(o: &Output, needle: &str) {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)")]
 fn full_stdout_is_exit_1_with_one_line_in_every_command() {
     let case = dwell_case();
     let mut cmds: Vec<(&str, Command)> = Vec::new();
@@ -97,6 +90,7 @@ fn full_stdout_is_exit_1_with_one_line_in_every_command() {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)")]
 fn closed_pipe_ends_quietly_without_a_panic() {
     let mut c = bin();
     c.arg("dwell").arg(dwell_case());
@@ -116,6 +110,7 @@ fn closed_pipe_ends_quietly_without_a_panic() {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)")]
 fn json_dash_is_stdout_in_dwell_and_vibration() {
     let d = tempfile::tempdir().unwrap();
     for args in [
@@ -139,6 +134,7 @@ fn json_dash_is_stdout_in_dwell_and_vibration() {
 }
 
 #[test]
+#[cfg_attr(no_shared_data, ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)")]
 fn unwritable_output_is_exit_2_naming_the_file_once_everywhere() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("no/such/dir/out.csv");
