@@ -28,7 +28,10 @@ fn run(args: &[&str], threads: Option<&str>) -> Vec<u8> {
 }
 
 #[test]
-#[cfg_attr(no_shared_data, ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)")]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn stats_json_is_byte_identical_across_runs_and_thread_counts() {
     let file = real("prysm_valid_zygo_dat_file.dat");
     let f = file.to_str().unwrap();
@@ -43,7 +46,10 @@ fn stats_json_is_byte_identical_across_runs_and_thread_counts() {
 }
 
 #[test]
-#[cfg_attr(no_shared_data, ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)")]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn psd_json_is_byte_identical_across_runs() {
     let file = real("pyxsurf_01_801B.dat");
     let args = ["psd", file.to_str().unwrap(), "--json", "--pitch-mm", "3"];
