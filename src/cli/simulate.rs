@@ -411,7 +411,7 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
 fn check_pitch(recipe_file: &Path, recipe: &Recipe, dy_mm: f64) -> Result<(), CliError> {
     match recipe.pitch_mm {
         // The pixel size is single precision in most formats: 2 pixels within 1e-6 pass.
-        Some(p) if !(p >= 2.0 * dy_mm * (1.0 - 1e-6)) => Err(CliError::input(
+        Some(p) if p.is_nan() || p < 2.0 * dy_mm * (1.0 - 1e-6) => Err(CliError::input(
             recipe_file,
             format!(
                 "[path] pitch_mm: {} mm is shorter than two Y pixels of {} ({} mm): no raster \

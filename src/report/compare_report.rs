@@ -369,7 +369,7 @@ fn ripple_section(page: &mut Page, c: &Comparison) {
                     nm(p.sigma_total_nm),
                     nm(p.a_eq_nm),
                     nm(p.pv_eq_nm),
-                    format!("{}", fixed(p.prominence_db, 1)),
+                    fixed(p.prominence_db, 1),
                     p.verdict.clone(),
                     p.y_over_x
                         .map(|v| fixed(v, 2))

@@ -141,8 +141,8 @@ pub fn section(page: &mut Page, preds: &[PredictedMsf]) {
             p.bonnet.clone(),
             opt_nm(p.ripple_sigma1_nm),
             opt_nm(p.baseline_ripple_sigma1_nm),
-            format!("{}", fixed(p.removal_msf_band_rms_nm, 4)),
-            format!("{}", fixed(p.baseline_msf_band_rms_nm, 4)),
+            fixed(p.removal_msf_band_rms_nm, 4),
+            fixed(p.baseline_msf_band_rms_nm, 4),
             format!("{:.3e}", p.induced_msf_band_rms_nm),
             format!(
                 "{} \u{2013} {}",

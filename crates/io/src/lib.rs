@@ -70,7 +70,7 @@ fn check_heights(s: &Surface) -> Result<(), ParseError> {
         .heights_nm()
         .indexed_iter()
         .zip(s.valid().iter())
-        .find(|((_, z), &v)| v && !(z.abs() <= HEIGHT_LIMIT_NM));
+        .find(|((_, z), &v)| v && (z.is_nan() || z.abs() > HEIGHT_LIMIT_NM));
     match bad {
         Some((((i, j), z), _)) => Err(ParseError::Invalid(format!(
             "height {} nm at row {}, column {} is beyond +/-{} nm: not a surface height",
