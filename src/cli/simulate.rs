@@ -229,7 +229,10 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
         &recipe.path_log,
         (grid.x0_mm, grid.x_mm(grid.cols - 1)),
         (grid.y0_mm, grid.y_mm(grid.rows - 1)),
-        ex.max(ey),
+        // Overtravel beyond the spot (turnarounds off the part) is allowed up to one part
+        // length; anything further is a corrupt log.
+        ex.max(ey)
+            + (grid.x_mm(grid.cols - 1) - grid.x0_mm).max(grid.y_mm(grid.rows - 1) - grid.y0_mm),
     )
     .map_err(|e| perr(&recipe.path_log, e))?;
     step("removal");
