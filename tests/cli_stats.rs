@@ -5,10 +5,11 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
 fn real(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/real")
-        .join(name)
+    shared_data::data_file("real", name)
 }
 
 fn stats(args: &[&str]) -> Output {
@@ -66,6 +67,10 @@ fn close(got: f64, want: f64, rel: f64) -> bool {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn real_files_match_golden_values() {
     for &(name, format, rows, cols, dx_m, valid, pv_p, rms_p, pv_t, rms_t) in &GOLDEN {
         let file = real(name);
@@ -116,6 +121,10 @@ fn real_files_match_golden_values() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn table_output_and_higher_order_terms() {
     let file = real("prysm_valid_zygo_dat_file.dat");
     let out = stats(&[file.to_str().unwrap(), "--remove", "piston,tilt,power"]);
@@ -168,6 +177,10 @@ fn set_u32(b: &mut [u8], off: usize, v: u32) {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn malformed_inputs_give_exit_codes_and_one_line_errors() {
     let dir = tempfile::tempdir().unwrap();
     let write = |name: &str, bytes: &[u8]| {
@@ -225,12 +238,8 @@ fn malformed_inputs_give_exit_codes_and_one_line_errors() {
 /// Every map file of a shared data directory (the directory must exist and hold maps: a
 /// missing checkout fails here with the path, it never passes silently).
 fn maps_in(dir: &Path) -> Vec<PathBuf> {
-    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| {
-        panic!(
-            "{}: cannot list the shared data ({e}); ../shared must sit beside the repository",
-            dir.display()
-        )
-    });
+    let entries = std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{}: cannot list the shared data ({e})", dir.display()));
     let mut v: Vec<PathBuf> = entries
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
@@ -248,10 +257,14 @@ fn maps_in(dir: &Path) -> Vec<PathBuf> {
 /// demo sample maps: the resolvable bands add up in quadrature to the map RMS (within 1 %,
 /// the bound; the method makes it exact), and every absent band has a reason.
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn bands_add_in_quadrature_on_every_real_file_and_the_demo_maps() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut files = maps_in(&root.join("../shared/data/real"));
-    files.extend(maps_in(&root.join("../shared/data/external")));
+    let mut files = maps_in(&shared_data::data_dir("real"));
+    files.extend(maps_in(&shared_data::data_dir("external")));
     for run in ["original", "suppression"] {
         files.extend(maps_in(&root.join("samples").join(run)));
     }

@@ -166,3 +166,122 @@ fn psd_prints_the_pixel_size_to_its_precision() {
     assert!(out.contains("dx 0.4 mm, dy 0.4 mm"), "{out}");
     assert!(!out.contains("0.3999999"), "{out}");
 }
+
+/// A run directory: the bundled sample before/after maps, a 3 mm raster log over the part and
+/// a recipe with a Gaussian TIF model.
+fn run_dir(dir: &Path) -> std::path::PathBuf {
+    let s = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/original");
+    std::fs::copy(s.join("before_1.dat"), dir.join("before.dat")).unwrap();
+    std::fs::copy(s.join("after_1.dat"), dir.join("after.dat")).unwrap();
+    let mut log = String::from("t_s,x_mm,y_mm\n");
+    let mut t = 0.0;
+    for i in 0..30 {
+        let y = 5.0 + 3.0 * i as f64;
+        for k in 0..=90 {
+            let x = if i % 2 == 0 { 5 + k } else { 95 - k } as f64;
+            log.push_str(&format!("{t:.3},{x},{y}\n"));
+            t += 0.1;
+        }
+    }
+    std::fs::write(dir.join("path.csv"), log).unwrap();
+    let recipe = dir.join("recipe.toml");
+    std::fs::write(
+        &recipe,
+        "[measurement]\nbefore = \"before.dat\"\nafter = \"after.dat\"\n[tif]\n\
+         model = { kind = \"gaussian\", sigma_mm = 1.0, peak_rate_nm_per_s = 10.0, diameter_mm = 8.0 }\n\
+         [path]\nlog = \"path.csv\"\npitch_mm = 3.0\n",
+    )
+    .unwrap();
+    recipe
+}
+
+/// Issue #17: `simulate` and `calibrate` printed nothing on success; now one line each, naming
+/// what was written and the headline numbers (no float artefacts, no 300-digit numbers).
+#[test]
+fn simulate_and_calibrate_print_one_line_on_success() {
+    let dir = tempfile::tempdir().unwrap();
+    let recipe = run_dir(dir.path());
+    let out = ok(&bin()
+        .arg("simulate")
+        .arg(&recipe)
+        .args(["--no-vibration", "--out"])
+        .arg(dir.path().join("sim"))
+        .output()
+        .unwrap());
+    assert_eq!(out.lines().count(), 1, "{out}");
+    assert!(out.starts_with("simulate: wrote "), "{out}");
+    assert!(
+        out.contains("simulation.json") && out.contains(" nm"),
+        "{out}"
+    );
+    assert!(
+        out.contains("ripple sigma1") && out.contains("3 mm pitch"),
+        "{out}"
+    );
+    let out = ok(&bin()
+        .arg("calibrate")
+        .arg(&recipe)
+        .arg("--out")
+        .arg(dir.path().join("cal"))
+        .output()
+        .unwrap());
+    assert_eq!(out.lines().count(), 1, "{out}");
+    assert!(out.starts_with("calibrate: wrote "), "{out}");
+    assert!(
+        out.contains("report.html") && out.contains("residual RMS"),
+        "{out}"
+    );
+    assert!(dir.path().join("cal/calibration.json").is_file());
+    // Without --json / --out the JSON itself goes to stdout (the contract), no summary.
+    let out = ok(&bin().arg("calibrate").arg(&recipe).output().unwrap());
+    let v: serde_json::Value = serde_json::from_str(&out).expect("stdout is the JSON");
+    assert!(v["final"].is_object());
+}
+
+/// Issue #17: `psd --pixel-mm-y` gives a map without a pixel size rectangular pixels.
+#[test]
+fn psd_takes_a_rectangular_pixel_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = dir.path().join("m.csv");
+    csv_without_pixel_size(&m, 0.0);
+    let out = ok(&bin()
+        .arg("psd")
+        .arg(&m)
+        .args(["--pixel-mm", "0.5", "--pixel-mm-y", "0.25", "--json"])
+        .output()
+        .unwrap());
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["dx_mm"], 0.5);
+    assert_eq!(v["dy_mm"], 0.25);
+    let o = bin()
+        .arg("psd")
+        .arg(&m)
+        .args(["--pixel-mm-y", "0.25"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "--pixel-mm-y needs --pixel-mm");
+}
+
+/// Issue #17: `psd` on a 1e-300 mm pixel printed df as a 300-digit number; every number of the
+/// summary now has at most a few significant digits or an exponent.
+#[test]
+fn no_output_prints_a_number_hundreds_of_digits_long() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = dir.path().join("m.csv");
+    csv_without_pixel_size(&m, 0.0);
+    for px in ["1e-300", "1e300"] {
+        let out = ok(&bin()
+            .arg("psd")
+            .arg(&m)
+            .args(["--pixel-mm", px])
+            .output()
+            .unwrap());
+        let longest = out
+            .split(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .map(str::len)
+            .max()
+            .unwrap_or(0);
+        assert!(longest <= 20, "a {longest}-character number in: {out}");
+        assert!(out.contains("dx 1e"), "{out}");
+    }
+}

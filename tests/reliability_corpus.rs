@@ -10,6 +10,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
 fn corpus_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus")
 }
@@ -55,12 +58,7 @@ fn every_corpus_file_fails_cleanly() {
 }
 
 fn real(name: &str) -> Vec<u8> {
-    std::fs::read(
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../shared/data/real")
-            .join(name),
-    )
-    .expect("real sample")
+    std::fs::read(shared_data::data_file("real", name)).expect("real sample")
 }
 
 fn put_u16(b: &mut [u8], off: usize, v: u16) {

@@ -1,13 +1,14 @@
 //! Determinism (issue 8): the same command on the same input gives byte-identical output,
 //! across runs and across thread counts (form fits reduce row bands in a fixed order).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
 fn real(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/real")
-        .join(name)
+    shared_data::data_file("real", name)
 }
 
 fn run(args: &[&str], threads: Option<&str>) -> Vec<u8> {
@@ -27,6 +28,10 @@ fn run(args: &[&str], threads: Option<&str>) -> Vec<u8> {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn stats_json_is_byte_identical_across_runs_and_thread_counts() {
     let file = real("prysm_valid_zygo_dat_file.dat");
     let f = file.to_str().unwrap();
@@ -41,6 +46,10 @@ fn stats_json_is_byte_identical_across_runs_and_thread_counts() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn psd_json_is_byte_identical_across_runs() {
     let file = real("pyxsurf_01_801B.dat");
     let args = ["psd", file.to_str().unwrap(), "--json", "--pitch-mm", "3"];

@@ -8,6 +8,9 @@ use std::os::unix::fs::FileTypeExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 
+#[path = "common/shared_data.rs"]
+mod shared_data;
+
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
 }
@@ -16,20 +19,9 @@ fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// A dwell case from ../shared; fails (never skips) when the shared data is missing.
+/// A public dwell case from shared/data (tests using it are marked as needing the data).
 fn dwell_case() -> PathBuf {
-    let p = repo().join("../shared/data/dwell/rifta_case_a.toml");
-    let p = if p.exists() {
-        p
-    } else {
-        repo().join("../../shared/data/dwell/rifta_case_a.toml")
-    };
-    assert!(
-        p.exists(),
-        "missing shared data: {} (clone ../shared beside the repository)",
-        p.display()
-    );
-    p
+    shared_data::data_file("dwell", "rifta_case_a.toml")
 }
 
 fn sample_map() -> PathBuf {
@@ -68,6 +60,10 @@ fn one_line(o: &Output, needle: &str) {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn full_stdout_is_exit_1_with_one_line_in_every_command() {
     let case = dwell_case();
     let mut cmds: Vec<(&str, Command)> = Vec::new();
@@ -97,6 +93,10 @@ fn full_stdout_is_exit_1_with_one_line_in_every_command() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn closed_pipe_ends_quietly_without_a_panic() {
     let mut c = bin();
     c.arg("dwell").arg(dwell_case());
@@ -116,6 +116,10 @@ fn closed_pipe_ends_quietly_without_a_panic() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn json_dash_is_stdout_in_dwell_and_vibration() {
     let d = tempfile::tempdir().unwrap();
     for args in [
@@ -139,6 +143,10 @@ fn json_dash_is_stdout_in_dwell_and_vibration() {
 }
 
 #[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
 fn unwritable_output_is_exit_2_naming_the_file_once_everywhere() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("no/such/dir/out.csv");
@@ -363,4 +371,48 @@ fn usage_errors_are_one_line() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
     one_line(&o, "between 0 and 1000");
+}
+
+/// Issue #18: `simulate --out` and `calibrate --out` are published as a set under the
+/// directory's lock, like `compare`: a second writer is refused and nothing is written.
+#[test]
+fn simulate_and_calibrate_outputs_are_published_as_a_set_under_the_lock() {
+    let d = tempfile::tempdir().unwrap();
+    let s = repo().join("samples/original");
+    let mut log = String::from("t_s,x_mm,y_mm\n");
+    for k in 0..=80 {
+        log.push_str(&format!("{},{},50\n", 0.1 * k as f64, 10 + k));
+    }
+    std::fs::write(d.path().join("path.csv"), log).unwrap();
+    let recipe = d.path().join("r.toml");
+    std::fs::write(
+        &recipe,
+        format!(
+            "[measurement]\nbefore = \"{}\"\nafter = \"{}\"\n[tif]\n\
+             model = {{ kind = \"gaussian\", sigma_mm = 1.0, peak_rate_nm_per_s = 10.0, diameter_mm = 8.0 }}\n\
+             [path]\nlog = \"path.csv\"\n",
+            s.join("before_1.dat").display(),
+            s.join("after_1.dat").display()
+        ),
+    )
+    .unwrap();
+    for cmd in ["simulate", "calibrate"] {
+        let dir = d.path().join(cmd);
+        std::fs::create_dir(&dir).unwrap();
+        std::fs::write(
+            dir.join(".bonnetlab.lock"),
+            format!("{}\n", std::process::id()),
+        )
+        .unwrap();
+        let mut c = bin();
+        c.arg(cmd).arg(&recipe);
+        if cmd == "simulate" {
+            c.arg("--no-vibration");
+        }
+        c.arg("--out").arg(&dir);
+        let o = run(c, Stdio::null());
+        assert_eq!(o.status.code(), Some(2), "{cmd}: {}", err(&o));
+        one_line(&o, "another bonnetlab run");
+        assert_eq!(listing(&dir), vec![".bonnetlab.lock".to_string()], "{cmd}");
+    }
 }

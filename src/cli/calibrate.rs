@@ -14,6 +14,7 @@ use bonnetlab_surface::Surface;
 use ndarray::Array2;
 
 use super::CliError;
+use crate::report::format::fixed;
 use crate::report::html::{escape, Page, Table};
 use crate::report::maps::false_colour_png;
 use crate::report::plot::{LinePlot, Series};
@@ -43,42 +44,94 @@ pub fn load(recipe_path: &Path) -> Result<Problem, CliError> {
 }
 
 pub fn run(args: &Args) -> Result<(), CliError> {
+    let bar = spinner();
+    bar.set_message(format!("reading the run of {}", args.recipe.display()));
     let problem = load(&args.recipe)?;
+    bar.set_message("calibrating (baseline fit, candidate effects, hold-out tests)");
     let cal = calibrate(&problem, &Options::default())
         .map_err(|e| CliError::processing(&args.recipe, e))?;
+    bar.finish_and_clear();
     let text = serde_json::to_string_pretty(&cal)
         .map_err(|e| CliError::processing(&args.recipe, e))?
         + "\n";
+    if let Some(dir) = &args.out {
+        // calibration.json and report.html are published together or not at all.
+        let werr = |e: crate::report::write::WriteError| CliError::input(&e.file, e.what);
+        let mut set = crate::report::write::Set::begin(dir).map_err(werr)?;
+        set.bytes("calibration.json", text.as_bytes())
+            .map_err(werr)?;
+        let html = report_html(&cal, &args.recipe).map_err(|e| CliError::processing(dir, e))?;
+        set.bytes("report.html", html.as_bytes()).map_err(werr)?;
+        set.commit().map_err(werr)?;
+    }
     if let Some(out) = &args.json {
         super::emit(out, text.as_bytes())?;
     }
-    if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| CliError::input(dir, format!("cannot create directory: {e}")))?;
-        let j = dir.join("calibration.json");
-        bonnetlab_io::atomic::write_atomic(&j, text.as_bytes())
-            .map_err(|e| CliError::input(&j, format!("cannot write: {e}")))?;
-        let html = report_html(&cal, &args.recipe).map_err(|e| CliError::processing(dir, e))?;
-        let h = dir.join("report.html");
-        bonnetlab_io::atomic::write_atomic(&h, html.as_bytes())
-            .map_err(|e| CliError::input(&h, format!("cannot write: {e}")))?;
-    }
-    if args.json.is_none() && args.out.is_none() {
-        super::write_stdout(text.as_bytes())?;
+    let json_on_stdout = match &args.json {
+        Some(out) => super::is_stdout(out),
+        None => args.out.is_none(),
+    };
+    if json_on_stdout {
+        if args.json.is_none() {
+            super::write_stdout(text.as_bytes())?;
+        }
+    } else {
+        super::println_stdout(&summary(&cal, args))?;
     }
     Ok(())
+}
+
+/// A spinner on stderr while the run loads and calibrates (a terminal only).
+fn spinner() -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    let target = if std::io::stderr().is_terminal() {
+        indicatif::ProgressDrawTarget::stderr()
+    } else {
+        indicatif::ProgressDrawTarget::hidden()
+    };
+    let bar = indicatif::ProgressBar::with_draw_target(None, target);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} calibrate {elapsed} {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
+    bar
+}
+
+/// The one line `calibrate` prints when the JSON does not go to stdout.
+pub fn summary(cal: &Calibration, args: &Args) -> String {
+    let mut wrote = Vec::new();
+    if let Some(dir) = &args.out {
+        wrote.push(dir.join("report.html").display().to_string());
+    }
+    if let Some(j) = &args.json {
+        wrote.push(j.display().to_string());
+    }
+    let effects: Vec<&str> = cal.effects.iter().map(|e| e.kind.as_str()).collect();
+    format!(
+        "calibrate: wrote {}: residual RMS {} -> {} nm (noise floor {} nm), effects: {}",
+        wrote.join(", "),
+        fixed(cal.baseline.residual_rms_nm, 4),
+        fixed(cal.final_.residual_rms_nm, 4),
+        fixed(cal.noise_floor_rms_nm, 4),
+        if effects.is_empty() {
+            "none".to_string()
+        } else {
+            effects.join(", ")
+        }
+    )
 }
 
 fn fmt_param(v: &serde_json::Value, u: Option<&serde_json::Value>) -> String {
     match (v, u) {
         (serde_json::Value::Number(n), Some(serde_json::Value::Number(s))) => {
             format!(
-                "{:.5} ± {:.2e}",
-                n.as_f64().unwrap_or(f64::NAN),
+                "{} ± {:.2e}",
+                fixed(n.as_f64().unwrap_or(f64::NAN), 5),
                 s.as_f64().unwrap_or(f64::NAN)
             )
         }
-        (serde_json::Value::Number(n), _) => format!("{:.5}", n.as_f64().unwrap_or(f64::NAN)),
+        (serde_json::Value::Number(n), _) => fixed(n.as_f64().unwrap_or(f64::NAN), 5),
         (serde_json::Value::String(s), _) => s.clone(),
         (other, _) => other.to_string(),
     }
@@ -99,29 +152,29 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
     let mut t = Table::new(["stage", "residual RMS (nm)", "residual PV (nm)"]);
     t.row([
         "measured removal (piston, tilt removed)".to_string(),
-        format!("{:.4}", cal.baseline.measured_removal_rms_nm),
+        fixed(cal.baseline.measured_removal_rms_nm, 4),
         String::new(),
     ]);
     t.row([
         "baseline (process model, global rate fit)".to_string(),
-        format!("{:.4}", cal.baseline.residual_rms_nm),
-        format!("{:.4}", cal.baseline.residual_pv_nm),
+        fixed(cal.baseline.residual_rms_nm, 4),
+        fixed(cal.baseline.residual_pv_nm, 4),
     ]);
     for e in &cal.effects {
         t.row([
             format!("+ {}", e.kind),
-            format!("{:.4}", e.residual_rms_after_nm),
+            fixed(e.residual_rms_after_nm, 4),
             String::new(),
         ]);
     }
     t.row([
         "final (joint refit)".to_string(),
-        format!("{:.4}", cal.final_.residual_rms_nm),
-        format!("{:.4}", cal.final_.residual_pv_nm),
+        fixed(cal.final_.residual_rms_nm, 4),
+        fixed(cal.final_.residual_pv_nm, 4),
     ]);
     t.row([
         "noise floor (from the maps)".to_string(),
-        format!("{:.4}", cal.noise_floor_rms_nm),
+        fixed(cal.noise_floor_rms_nm, 4),
         String::new(),
     ]);
     page.table(&t);
@@ -148,10 +201,10 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
             t.row([
                 e.kind.clone(),
                 params.join("; "),
-                format!("{:.4}", e.residual_rms_before_nm),
-                format!("{:.4}", e.residual_rms_after_nm),
-                format!("{:.1}", e.significance),
-                format!("{:.2} %", 100.0 * e.heldout_reduction_fraction),
+                fixed(e.residual_rms_before_nm, 4),
+                fixed(e.residual_rms_after_nm, 4),
+                fixed(e.significance, 1),
+                format!("{} %", fixed(100.0 * e.heldout_reduction_fraction, 2)),
             ]);
         }
         page.table(&t);
@@ -164,8 +217,12 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
         for u in &cal.unexplained {
             t.row([
                 u.description.clone(),
-                format!("{:.4} - {:.4}", u.band_per_mm[0], u.band_per_mm[1]),
-                format!("{:.4}", u.rms_nm),
+                format!(
+                    "{} - {}",
+                    fixed(u.band_per_mm[0], 4),
+                    fixed(u.band_per_mm[1], 4)
+                ),
+                fixed(u.rms_nm, 4),
             ]);
         }
         page.table(&t);
@@ -238,7 +295,7 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
         let best: Vec<String> = c
             .iter()
             .take(3)
-            .map(|c| format!("{} (z {:.1})", c.key, c.z))
+            .map(|c| format!("{} (z {})", c.key, fixed(c.z, 1)))
             .collect();
         t.row([
             format!("{}", i + 1),

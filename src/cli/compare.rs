@@ -8,6 +8,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use super::CliError;
 use crate::report::compare_report::write_report;
 use crate::report::comparison::{compare, CompareError, Comparison, RunSpec, Settings};
+use crate::report::format::fixed;
 use bonnetlab_spectrum::Window;
 use bonnetlab_surface::Term;
 
@@ -125,8 +126,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         code: 2,
         message: e.to_string(),
     })?;
-    println!("{}", summary(&args.out, &c));
-    Ok(())
+    super::println_stdout(&summary(&args.out, &c))
 }
 
 /// The one line `compare` prints on success.
@@ -136,11 +136,11 @@ pub fn summary(out: &Path, c: &Comparison) -> String {
         .iter()
         .map(|r| {
             format!(
-                "{} RMS {:.3} -> {:.3} nm (CR {:.1} %)",
+                "{} RMS {} -> {} nm (CR {} %)",
                 r.name,
-                r.rms_before_nm,
-                r.rms_after_nm,
-                100.0 * r.cr_rms
+                fixed(r.rms_before_nm, 3),
+                fixed(r.rms_after_nm, 3),
+                fixed(100.0 * r.cr_rms, 1)
             )
         })
         .collect();

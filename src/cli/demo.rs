@@ -8,6 +8,7 @@
 //!   also carries the vibration coupling's predicted MSF per bonnet on a run matching the sample
 //!   ([`predicted_msf`]: the paper's bonnet and process parameters, 3 mm raster, sample grid).
 
+use crate::report::format::fixed;
 use std::path::{Path, PathBuf};
 
 use super::compare::compare_with_progress;
@@ -293,13 +294,13 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         let shares: Vec<String> = p
             .mechanisms
             .iter()
-            .map(|m| format!("{} {:.1} %", m.name, 100.0 * m.share))
+            .map(|m| format!("{} {} %", m.name, fixed(100.0 * m.share, 1)))
             .collect();
         eprintln!(
             "  {}: predicted Y ripple sigma1 {} nm, MSF band RMS {:.4} nm ({})",
             p.bonnet,
             p.ripple_sigma1_nm
-                .map(|v| format!("{v:.4}"))
+                .map(|v| fixed(v, 4))
                 .unwrap_or_else(|| "n/a".into()),
             p.removal_msf_band_rms_nm,
             shares.join(", ")
@@ -313,7 +314,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     for r in &c.runs {
         let imp = r
             .improvement_cr_rms
-            .map(|v| format!(", improvement CR(RMS) {:.2} %", 100.0 * v))
+            .map(|v| format!(", improvement CR(RMS) {} %", fixed(100.0 * v, 2)))
             .unwrap_or_default();
         eprintln!(
             "  {}: RMS {:.3} -> {:.3} nm, CR(RMS) {:.2} %, CR(PV) {:.2} %{imp}",
@@ -330,7 +331,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     let crs: Vec<String> = c
         .runs
         .iter()
-        .map(|r| format!("{} CR(RMS) {:.1} %", r.name, 100.0 * r.cr_rms))
+        .map(|r| format!("{} CR(RMS) {} %", r.name, fixed(100.0 * r.cr_rms, 1)))
         .collect();
     println!(
         "demo: wrote {} ({} runs, {n} maps from {}; {})",

@@ -12,6 +12,7 @@
 //! spectra in long form; `--plot` draws both PSDs log-log with the grating frequency and its
 //! harmonics marked.
 
+use crate::report::format::fixed;
 use std::path::{Path, PathBuf};
 
 use bonnetlab_spectrum::{
@@ -101,9 +102,13 @@ pub struct Args {
     /// Also give the PSDs in a peer tool's convention (JSON `converted`, extra CSV columns).
     #[arg(long, value_enum)]
     pub convention: Option<Convention>,
-    /// Pixel size in mm for a map whose file says it is unknown (square pixels).
-    #[arg(long)]
+    /// Pixel size in mm for a map whose file says it is unknown (square pixels unless
+    /// --pixel-mm-y is given).
+    #[arg(long, value_name = "MM")]
     pub pixel_mm: Option<f64>,
+    /// Pixel size along Y (rows) in mm when it differs from --pixel-mm.
+    #[arg(long, value_name = "MM", requires = "pixel_mm")]
+    pub pixel_mm_y: Option<f64>,
     /// Print one JSON object instead of a summary.
     #[arg(long)]
     pub json: bool,
@@ -195,14 +200,9 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         plot_kind(p)?;
     }
     let mut surface = read_map(file)?;
-    if let Some(px) = args.pixel_mm {
-        if !(px.is_finite() && px > 0.0) {
-            return Err(CliError::usage(format!(
-                "--pixel-mm must be positive, got {px}"
-            )));
-        }
+    if let Some((px, py)) = super::compare::pixel_size(args.pixel_mm, args.pixel_mm_y)? {
         surface.dx_mm = Some(surface.dx_mm.unwrap_or(px));
-        surface.dy_mm = Some(surface.dy_mm.unwrap_or(px));
+        surface.dy_mm = Some(surface.dy_mm.unwrap_or(py));
     }
     let report = analyse(&surface, file, args, &opts, msf, limit.as_ref())?;
     if let Some(out) = &args.csv {
@@ -503,24 +503,21 @@ fn summary(r: &PsdReport) -> String {
         crate::report::format::f32_value(r.dx_mm),
         crate::report::format::f32_value(r.dy_mm)
     ));
-    line(format!(
-        "removed: {}; per-segment detrend: {:?}; window: {} (ENBW {:.3} bins); gaps <= {} px interpolated",
-        names(&r.removed),
-        r.detrend,
-        r.window,
-        r.enbw_bins,
-        r.max_gap_px
-    ));
+    line(format!("removed: {}; per-segment detrend: {:?}; window: {} (ENBW {} bins); gaps <= {} px interpolated", names(&r.removed), r.detrend, r.window, fixed(r.enbw_bins, 3), r.max_gap_px));
     line("PSDs are one-sided, nm^2 mm; band RMS by bin sums".into());
     for (name, a) in [("X (rows)", &r.x), ("Y (columns)", &r.y)] {
         let Some(a) = a else { continue };
         line(format!(
-            "{name}: {} lines, {} segments, df {:.6} mm^-1, first unbiased bin {}",
-            a.n_lines, a.n_segments, a.df_per_mm, a.biased_bins
+            "{name}: {} lines, {} segments, df {} mm^-1, first unbiased bin {}",
+            a.n_lines,
+            a.n_segments,
+            fixed(a.df_per_mm, 6),
+            a.biased_bins
         ));
         match (a.rms_unbiased_nm, &a.rms_unbiased_reason) {
             (Some(v), _) => line(format!(
-                "  PSD-integrated RMS over the unbiased bins: {v:.4} nm"
+                "  PSD-integrated RMS over the unbiased bins: {v_s} nm",
+                v_s = fixed(v, 4)
             )),
             (None, why) => line(format!(
                 "  PSD-integrated RMS over the unbiased bins: absent ({})",
@@ -529,26 +526,30 @@ fn summary(r: &PsdReport) -> String {
         }
         match (a.msf.rms_nm, a.msf.f1_used_per_mm, a.msf.f2_used_per_mm) {
             (Some(v), Some(lo), Some(hi)) => line(format!(
-                "  PSD-integrated MSF band [{:.6}, {:.6}] mm^-1 (used [{lo:.6}, {hi:.6}]): {v:.4} nm",
-                a.msf.f1_per_mm, a.msf.f2_per_mm
+                "  PSD-integrated MSF band [{}, {}] mm^-1 (used [{lo_s}, {hi_s}]): {v_s} nm",
+                fixed(a.msf.f1_per_mm, 6),
+                fixed(a.msf.f2_per_mm, 6),
+                lo_s = fixed(lo, 6),
+                hi_s = fixed(hi, 6),
+                v_s = fixed(v, 4)
             )),
             _ => line(format!(
-                "  PSD-integrated MSF band [{:.6}, {:.6}] mm^-1: absent ({})",
-                a.msf.f1_per_mm,
-                a.msf.f2_per_mm,
+                "  PSD-integrated MSF band [{}, {}] mm^-1: absent ({})",
+                fixed(a.msf.f1_per_mm, 6),
+                fixed(a.msf.f2_per_mm, 6),
                 a.msf.reason.as_deref().unwrap_or("not computed")
             )),
         }
         if let Some(l) = &a.limit {
             line(format!(
-                "  limit {} f^-{} ({}) over [{}, {}] mm^-1: worst ratio {:.3} at {:.4} mm^-1: {}",
+                "  limit {} f^-{} ({}) over [{}, {}] mm^-1: worst ratio {} at {} mm^-1: {}",
                 l.line.a,
                 l.line.b,
                 l.sidedness,
                 crate::report::format::sig(l.line.f1_per_mm, 6),
                 crate::report::format::sig(l.line.f2_per_mm, 6),
-                l.worst_ratio,
-                l.worst_freq_per_mm,
+                fixed(l.worst_ratio, 3),
+                fixed(l.worst_freq_per_mm, 4),
                 if l.pass { "PASS" } else { "FAIL" }
             ));
         }
@@ -562,12 +563,17 @@ fn summary(r: &PsdReport) -> String {
     }
     if let Some(rp) = &r.ripple {
         line(format!(
-            "ripple along Y at pitch {} mm (f0 {:.6} mm^-1, bands |f - k f0| <= {:.6} mm^-1):",
-            rp.pitch_mm, rp.f0_per_mm, rp.band_halfwidth_per_mm
+            "ripple along Y at pitch {} mm (f0 {} mm^-1, bands |f - k f0| <= {} mm^-1):",
+            rp.pitch_mm,
+            fixed(rp.f0_per_mm, 6),
+            fixed(rp.band_halfwidth_per_mm, 6)
         ));
         line(format!(
-            "  sigma_1 {:.4} nm, sigma_total {:.4} nm, A_eq {:.4} nm, PV_eq {:.4} nm",
-            rp.sigma1_nm, rp.sigma_total_nm, rp.a_eq_nm, rp.pv_eq_nm
+            "  sigma_1 {} nm, sigma_total {} nm, A_eq {} nm, PV_eq {} nm",
+            fixed(rp.sigma1_nm, 4),
+            fixed(rp.sigma_total_nm, 4),
+            fixed(rp.a_eq_nm, 4),
+            fixed(rp.pv_eq_nm, 4)
         ));
         line(format!(
             "  {} (prominence over the flanking median)",
@@ -581,7 +587,7 @@ fn summary(r: &PsdReport) -> String {
         let h: Vec<String> = rp
             .harmonics
             .iter()
-            .map(|h| format!("{}f0 {:.4} nm", h.k, h.sigma_nm))
+            .map(|h| format!("{}f0 {} nm", h.k, fixed(h.sigma_nm, 4)))
             .collect();
         line(format!("  harmonics: {}", h.join(", ")));
     }

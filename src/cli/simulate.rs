@@ -39,7 +39,6 @@ use bonnetlab_surface::{height_stats, remove_terms, Surface, Term};
 use bonnetlab_vibration::coupling::predict::default_sweep_rpm;
 use bonnetlab_vibration::coupling::{self, CouplingInput, CouplingOptions, SweepRow};
 use bonnetlab_vibration::params::{Bonnet, VibrationParams};
-use bonnetlab_vibration::VibrationError;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 
@@ -194,16 +193,8 @@ fn progress(n: u64) -> ProgressBar {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
     bar
-}
-
-fn verr(file: &Path, e: VibrationError) -> CliError {
-    match e {
-        VibrationError::InvalidParam { .. }
-        | VibrationError::UnknownKey(_)
-        | VibrationError::Conflict(..) => CliError::input(file, e),
-        _ => CliError::processing(file, e),
-    }
 }
 
 /// Runs the simulation of a recipe (no files written; `args.out` is not used).
@@ -231,6 +222,19 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
         .map_err(|e| perr(&spot_file, e))?;
     step("path");
     let path = read_path_csv(&recipe.path_log).map_err(|e| perr(&recipe.path_log, e))?;
+    check_pitch(recipe_file, &recipe, grid.dy_mm)?;
+    let (ex, ey) = tool.field().half_extent_mm();
+    bonnetlab_process::path::log::check_extent(
+        &path,
+        &recipe.path_log,
+        (grid.x0_mm, grid.x_mm(grid.cols - 1)),
+        (grid.y0_mm, grid.y_mm(grid.rows - 1)),
+        // Overtravel beyond the spot (turnarounds off the part) is allowed up to one part
+        // length; anything further is a corrupt log.
+        ex.max(ey)
+            + (grid.x_mm(grid.cols - 1) - grid.x0_mm).max(grid.y_mm(grid.rows - 1) - grid.y0_mm),
+    )
+    .map_err(|e| perr(&recipe.path_log, e))?;
     step("removal");
     let bonnet_name = match args.bonnet {
         Some(BonnetArg::Original) => "original".to_string(),
@@ -254,7 +258,7 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
             p.inner_pressure_mpa,
             None,
         )
-        .map_err(|e| verr(recipe_file, e))?;
+        .map_err(|e| super::vibration_error(recipe_file, recipe.vibration.as_ref(), e))?;
         let input = CouplingInput {
             grid,
             valid: Some(before.valid()),
@@ -265,16 +269,18 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
         };
         let copts = CouplingOptions::default();
         let sweep = if args.sweep_rpm {
+            bar.set_message("spindle-speed sweep (both bonnets)");
             Some(
-                coupling::spindle_sweep(&input, &copts, &default_sweep_rpm())
-                    .map_err(|e| verr(recipe_file, e))?,
+                coupling::spindle_sweep(&input, &copts, &default_sweep_rpm()).map_err(|e| {
+                    super::vibration_error(recipe_file, recipe.vibration.as_ref(), e)
+                })?,
             )
         } else {
             None
         };
         if with_vibration {
-            let pred =
-                coupling::predict(&input, bonnet, &copts).map_err(|e| verr(recipe_file, e))?;
+            let pred = coupling::predict(&input, bonnet, &copts)
+                .map_err(|e| super::vibration_error(recipe_file, recipe.vibration.as_ref(), e))?;
             let prediction = prediction_from(&before, pred.removal_nm())
                 .map_err(|e| CliError::processing(&recipe.before, e))?;
             if exact {
@@ -285,16 +291,10 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
             }
             (prediction, Some(pred), sweep)
         } else {
-            let mode = if exact { Mode::Exact } else { Mode::Fast };
-            let prediction =
-                predict(&before, &tool, &path, None, mode).map_err(|e| perr(&recipe.before, e))?;
-            (prediction, None, sweep)
+            (nominal(&before, &tool, &path, exact, &recipe)?, None, sweep)
         }
     } else {
-        let mode = if exact { Mode::Exact } else { Mode::Fast };
-        let prediction =
-            predict(&before, &tool, &path, None, mode).map_err(|e| perr(&recipe.before, e))?;
-        (prediction, None, None)
+        (nominal(&before, &tool, &path, exact, &recipe)?, None, None)
     };
     step("metrics");
     let terms = [Term::Piston, Term::Tilt];
@@ -409,6 +409,43 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
     })
 }
 
+/// A raster pitch shorter than two Y pixels of the before map cannot be a raster on this map
+/// (its ripple is above the Nyquist frequency): bad input naming the recipe key, exit 2.
+fn check_pitch(recipe_file: &Path, recipe: &Recipe, dy_mm: f64) -> Result<(), CliError> {
+    match recipe.pitch_mm {
+        // The pixel size is single precision in most formats: 2 pixels within 1e-6 pass.
+        Some(p) if p.is_nan() || p < 2.0 * dy_mm * (1.0 - 1e-6) => Err(CliError::input(
+            recipe_file,
+            format!(
+                "[path] pitch_mm: {} mm is shorter than two Y pixels of {} ({} mm): no raster \
+                 ripple at that pitch is resolvable on this map",
+                report::format::sig(p, 4),
+                recipe.before.display(),
+                report::format::sig(2.0 * dy_mm, 4)
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// The nominal prediction (no vibration). An exact walk refused for its size is the path log's
+/// doing and names it; other errors name the before map.
+fn nominal(
+    before: &Surface,
+    tool: &ToolModel,
+    path: &bonnetlab_process::PathLog,
+    exact: bool,
+    recipe: &Recipe,
+) -> Result<Prediction, CliError> {
+    let mode = if exact { Mode::Exact } else { Mode::Fast };
+    predict(before, tool, path, None, mode).map_err(|e| match e {
+        ProcessError::InvalidArgument(what) if exact => {
+            CliError::input(&recipe.path_log, what.replace("invalid argument: ", ""))
+        }
+        e => perr(&recipe.before, e),
+    })
+}
+
 /// Whether the recipe file has a `[process]` table (the parsed recipe fills defaults).
 fn has_process_table(recipe_file: &Path) -> bool {
     bonnetlab_io::input::read_text(recipe_file, bonnetlab_io::input::TEXT_LIMIT, "a recipe")
@@ -468,41 +505,60 @@ fn sweep_csv(rows: &[SweepRow]) -> String {
 
 pub fn run(args: &Args) -> Result<(), CliError> {
     let sim = simulate_recipe(&args.recipe, args)?;
-    write_outputs(&args.out, &sim)
+    write_outputs(&args.out, &sim)?;
+    super::println_stdout(&summary(&args.out, &sim.report))
 }
 
-/// Writes the maps, JSON and plots of a simulation into `dir`.
-pub fn write_outputs(dir: &Path, sim: &Simulation) -> Result<(), CliError> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| CliError::input(dir, format!("cannot create the output directory: {e}")))?;
-    let io = |e: bonnetlab_io::IoError| CliError {
-        code: e.exit_code(),
-        message: e.to_string(),
+/// The one line `simulate` prints on success.
+pub fn summary(out: &Path, r: &SimulationReport) -> String {
+    let fixed = report::format::fixed;
+    let ripple = match &r.ripple {
+        Some(p) => format!(
+            ", ripple sigma1 {} nm at the {} mm pitch",
+            fixed(p.sigma1_nm, 4),
+            report::format::sig(p.pitch_mm, 4)
+        ),
+        None => String::new(),
     };
-    bonnetlab_io::write_surface(
-        &dir.join("predicted_after.dat"),
+    format!(
+        "simulate: wrote {} ({}, {} bonnet): RMS {} -> {} nm predicted (CR {} %, piston and tilt removed){ripple}",
+        out.join("simulation.json").display(),
+        r.mode,
+        r.bonnet,
+        fixed(r.rms_before_nm, 3),
+        fixed(r.rms_after_nm, 3),
+        fixed(100.0 * r.cr_rms, 1),
+    )
+}
+
+/// Writes the maps, JSON and plots of a simulation into `dir`, published as one set (nothing
+/// in `dir` changes unless every file is written; a second run into `dir` is refused).
+pub fn write_outputs(dir: &Path, sim: &Simulation) -> Result<(), CliError> {
+    let werr = |e: report::write::WriteError| CliError::input(&e.file, e.what);
+    let mut set = report::write::Set::begin(dir).map_err(werr)?;
+    set.surface(
+        "predicted_after.dat",
         &sim.prediction.after,
         MapFormat::MetroProDat,
     )
-    .map_err(io)?;
-    bonnetlab_io::write_surface(
-        &dir.join("predicted_removal.dat"),
+    .map_err(werr)?;
+    set.surface(
+        "predicted_removal.dat",
         &sim.prediction.removal,
         MapFormat::MetroProDat,
     )
-    .map_err(io)?;
-    let werr = |e: report::write::WriteError| CliError::input(&e.file, e.what);
-    report::write::json(&dir.join("simulation.json"), &sim.report).map_err(werr)?;
-    let png =
+    .map_err(werr)?;
+    set.json("simulation.json", &sim.report).map_err(werr)?;
+    let mut stage =
         |name: &str, bytes: Result<Vec<u8>, report::plot::PlotError>| -> Result<(), CliError> {
             let bytes = bytes.map_err(|e| CliError::processing(dir.join(name), e.what))?;
-            report::write::bytes(&dir.join(name), &bytes).map_err(werr)
+            set.bytes(name, &bytes).map_err(werr)
         };
-    png(
+    stage(
         "predicted_removal.png",
         report::maps::false_colour_png(&sim.prediction.removal, "predicted removal", "nm"),
     )?;
-    png(
+    stage(
         "predicted_after.png",
         report::maps::false_colour_png(&sim.prediction.after, "predicted after map", "nm"),
     )?;
@@ -527,10 +583,9 @@ pub fn write_outputs(dir: &Path, sim: &Simulation) -> Result<(), CliError> {
     if let Some(p) = sim.report.pitch_mm {
         plot = plot.grating_markers(p, 3);
     }
-    png("predicted_psd_y.png", plot.to_png())?;
+    stage("predicted_psd_y.png", plot.to_png())?;
     if let Some(rows) = &sim.report.spindle_sweep {
-        report::write::bytes(&dir.join("spindle_sweep.csv"), sweep_csv(rows).as_bytes())
-            .map_err(werr)?;
+        stage("spindle_sweep.csv", Ok(sweep_csv(rows).into_bytes()))?;
         let mut plot = report::plot::LinePlot::new(
             "predicted removal ripple sigma1 (Y, 1/pitch) vs spindle speed",
             "spindle speed (rpm)",
@@ -546,7 +601,7 @@ pub fn write_outputs(dir: &Path, sim: &Simulation) -> Result<(), CliError> {
                 plot = plot.series(report::plot::Series::new(b.name(), x, y));
             }
         }
-        png("spindle_sweep.png", plot.to_png())?;
+        stage("spindle_sweep.png", plot.to_png())?;
     }
-    Ok(())
+    set.commit().map_err(werr)
 }

@@ -18,6 +18,7 @@
 //! Exit codes: 2 for a bad manifest or unreadable map (one line naming the file and the line /
 //! key), 1 for a spot that cannot be analysed.
 
+use crate::report::format::fixed;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -178,11 +179,11 @@ fn g(v: f64) -> String {
     if a != 0.0 && !(1e-3..1e5).contains(&a) {
         format!("{v:.4e}")
     } else if a >= 100.0 {
-        format!("{v:.1}")
+        fixed(v, 1)
     } else if a >= 1.0 {
-        format!("{v:.3}")
+        fixed(v, 3)
     } else {
-        format!("{v:.4}")
+        fixed(v, 4)
     }
 }
 
@@ -367,8 +368,8 @@ fn render_html(
             format!("{}-{}", g(o.bonnet_range.0), g(o.bonnet_range.1)),
             g(o.reference_mean),
             g(o.bonnet_mean),
-            format!("{:.2} %", 100.0 * o.degree),
-            format!("{:.2} %", 100.0 * o.mean_level_degree),
+            format!("{} %", fixed(100.0 * o.degree, 2)),
+            format!("{} %", fixed(100.0 * o.mean_level_degree, 2)),
         ]);
     }
     page.table(&t);
@@ -499,7 +500,7 @@ fn render_html(
                     fit.held.join("; "),
                     fit.rel_std_err
                         .iter()
-                        .map(|v| format!("{:.2} %", 100.0 * v))
+                        .map(|v| format!("{} %", fixed(100.0 * v, 2)))
                         .collect::<Vec<_>>()
                         .join(", "),
                     g(fit.rms_log_residual),
@@ -642,7 +643,7 @@ fn make_sample(dir: &Path) -> Result<(), CliError> {
             };
             seed += 1;
             let s = generate_spot(&spec).map_err(|e| CliError::processing(dir, e))?;
-            let file = format!("{name}_offset_{h:.1}.dat");
+            let file = format!("{name}_offset_{h_s}.dat", h_s = fixed(h, 1));
             write_surface(&dir.join(&file), &s, MapFormat::MetroProDat).map_err(|e| CliError {
                 code: e.exit_code(),
                 message: e.to_string(),

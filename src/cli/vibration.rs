@@ -13,6 +13,7 @@
 //! including ring-down after the reversals of the recipe's path log when it has one).
 
 use super::CliError;
+use crate::report::format::fixed;
 use crate::report::plot::{LinePlot, Series};
 use bonnetlab_vibration::modal::{crossed_modes, Crossing, MODES, SPINDLE_BAND_RPM};
 use bonnetlab_vibration::params::{Bonnet, LateralAxis, VibrationParams};
@@ -121,7 +122,9 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         .recipe
         .clone()
         .unwrap_or_else(|| PathBuf::from("(defaults)"));
-    let params = VibrationParams::from_recipe(&doc).map_err(|e| CliError::input(&name, e))?;
+    let params = VibrationParams::from_recipe(&doc).map_err(|e| {
+        super::vibration_error(&name, doc.get("vibration").and_then(|v| v.as_table()), e)
+    })?;
     let recipe_bonnet = doc
         .get("process")
         .and_then(|p| p.get("bonnet"))
@@ -217,7 +220,7 @@ fn summary(p: &VibrationParams, outs: &[BonnetOut]) -> String {
     }
     let modes: Vec<String> = MODES
         .iter()
-        .map(|m| format!("{}:{:.2} Hz", m.order, m.best_hz()))
+        .map(|m| format!("{}:{} Hz", m.order, fixed(m.best_hz(), 2)))
         .collect();
     let _ = writeln!(
         s,
@@ -259,7 +262,7 @@ fn write_plots(p: &VibrationParams, dir: &Path) -> Result<(), CliError> {
         }
         plot = plot.marker(
             p.excitation_hz(),
-            format!("spindle {:.0} rpm", p.spindle_rpm),
+            format!("spindle {} rpm", fixed(p.spindle_rpm, 0)),
         );
         for m in MODES.iter() {
             plot = plot.marker(m.best_hz(), format!("mode {}", m.order));

@@ -6,6 +6,7 @@
 //!
 //! Percentages are for people only: the JSON keeps fractions.
 
+use crate::report::format::fixed;
 use std::path::{Path, PathBuf};
 
 use super::comparison::{fmt_sig, BandCr, Comparison, RunResult};
@@ -33,18 +34,18 @@ impl From<super::plot::PlotError> for ReportError {
 }
 
 fn pct(v: f64) -> String {
-    format!("{:.2} %", 100.0 * v)
+    format!("{} %", fixed(100.0 * v, 2))
 }
 
 fn pct_pm(v: f64, sd: Option<f64>) -> String {
     match sd {
-        Some(s) => format!("{:.2} \u{b1} {:.2} %", 100.0 * v, 100.0 * s),
+        Some(s) => format!("{} \u{b1} {} %", fixed(100.0 * v, 2), fixed(100.0 * s, 2)),
         None => pct(v),
     }
 }
 
 fn nm(v: f64) -> String {
-    format!("{v:.3}")
+    fixed(v, 3)
 }
 
 /// A file-name-safe form of a run name.
@@ -257,29 +258,14 @@ fn noise_section(page: &mut Page, c: &Comparison) {
                         "beyond the measurement noise"
                     }
                 };
-                page.paragraph(&format!(
-                    "'{}' vs '{}': CR(RMS) differs by {:.2} \u{b1} {:.2} percentage points ({}); \
-                     CR(PV) by {:.2} \u{b1} {:.2} points ({}). Rule: a difference is within noise when it is \
-                     smaller than twice its standard deviation.",
-                    r.name,
-                    first.name,
-                    100.0 * n.cr_rms_difference,
-                    100.0 * n.cr_rms_difference_sd,
-                    verdict(n.rms_within_noise),
-                    100.0 * n.cr_pv_difference,
-                    100.0 * n.cr_pv_difference_sd,
-                    verdict(n.pv_within_noise),
-                ));
+                page.paragraph(&format!("'{}' vs '{}': CR(RMS) differs by {} \u{b1} {} percentage points ({}); \
+                     CR(PV) by {} \u{b1} {} points ({}). Rule: a difference is within noise when it is \
+                     smaller than twice its standard deviation.", r.name, first.name, fixed(100.0 * n.cr_rms_difference, 2), fixed(100.0 * n.cr_rms_difference_sd, 2), verdict(n.rms_within_noise), fixed(100.0 * n.cr_pv_difference, 2), fixed(100.0 * n.cr_pv_difference_sd, 2), verdict(n.pv_within_noise)));
             }
             None => {
-                page.paragraph(&format!(
-                    "'{}' vs '{}': no repeat measurements on both runs, so the noise of the convergence \
-                     ratios is unknown. Give repeats as NAME=B1+B2,A1+A2 to test whether the {:.2} % \
-                     improvement (RMS) exceeds the measurement noise.",
-                    r.name,
-                    first.name,
-                    100.0 * imp.improvement_cr_rms
-                ));
+                page.paragraph(&format!("'{}' vs '{}': no repeat measurements on both runs, so the noise of the convergence \
+                     ratios is unknown. Give repeats as NAME=B1+B2,A1+A2 to test whether the {} % \
+                     improvement (RMS) exceeds the measurement noise.", r.name, first.name, fixed(100.0 * imp.improvement_cr_rms, 2)));
             }
         }
     }
@@ -383,10 +369,10 @@ fn ripple_section(page: &mut Page, c: &Comparison) {
                     nm(p.sigma_total_nm),
                     nm(p.a_eq_nm),
                     nm(p.pv_eq_nm),
-                    format!("{:.1}", p.prominence_db),
+                    fixed(p.prominence_db, 1),
                     p.verdict.clone(),
                     p.y_over_x
-                        .map(|v| format!("{v:.2}"))
+                        .map(|v| fixed(v, 2))
                         .unwrap_or_else(|| "n/a".into()),
                 ]);
             }

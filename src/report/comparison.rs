@@ -485,6 +485,27 @@ fn analyse_run(
     let (pb, pa) = (each(mb, |m| m.pv_nm), each(ma, |m| m.pv_nm));
     let (rms_b, rms_a, pv_b, pv_a) = (mean(&rb), mean(&ra), mean(&pb), mean(&pa));
     let cr = |b: f64, a: f64| (b - a) / b;
+    // CR = (before - after) / before is undefined for a flat before map: bad input, named,
+    // never a silent null in report.json.
+    for (m, &p) in mb.iter().zip(&paths) {
+        if !(m.rms_nm > 0.0 && m.pv_nm > 0.0) {
+            return Err(CompareError::input(
+                p,
+                format!(
+                    "run '{}': the before map is flat after removing {} (RMS {} nm): the \
+                     convergence ratio (before - after) / before is undefined",
+                    spec.name,
+                    settings
+                        .remove
+                        .iter()
+                        .map(|t| t.name())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    crate::report::format::sig(m.rms_nm, 4)
+                ),
+            ));
+        }
+    }
 
     let spread = if mb.len() >= 2 && ma.len() >= 2 {
         let err = |e| CompareError::processing(paths[0], e);

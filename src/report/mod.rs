@@ -5,7 +5,7 @@ pub mod compare_report;
 pub mod comparison;
 pub mod dwell_report;
 pub mod font;
-pub mod format;
+pub use bonnetlab_surface::format;
 pub mod html;
 pub mod maps;
 pub mod msf_prediction;

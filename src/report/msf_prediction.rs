@@ -6,6 +6,7 @@
 //! fraction of the summed band power of the mechanisms and their interaction (as the vibration
 //! crate defines it); the band edges are in cycles/mm with the upper edge clipped to Nyquist.
 
+use crate::report::format::fixed;
 use serde::Serialize;
 
 use bonnetlab_vibration::coupling::predict::{BonnetPrediction, MechanismResult};
@@ -92,8 +93,7 @@ impl PredictedMsf {
 }
 
 fn opt_nm(v: Option<f64>) -> String {
-    v.map(|x| format!("{x:.4}"))
-        .unwrap_or_else(|| "\u{2014}".into())
+    v.map(|x| fixed(x, 4)).unwrap_or_else(|| "\u{2014}".into())
 }
 
 /// Appends the "Predicted MSF per bonnet" section.
@@ -141,8 +141,8 @@ pub fn section(page: &mut Page, preds: &[PredictedMsf]) {
             p.bonnet.clone(),
             opt_nm(p.ripple_sigma1_nm),
             opt_nm(p.baseline_ripple_sigma1_nm),
-            format!("{:.4}", p.removal_msf_band_rms_nm),
-            format!("{:.4}", p.baseline_msf_band_rms_nm),
+            fixed(p.removal_msf_band_rms_nm, 4),
+            fixed(p.baseline_msf_band_rms_nm, 4),
             format!("{:.3e}", p.induced_msf_band_rms_nm),
             format!(
                 "{} \u{2013} {}",
@@ -161,7 +161,7 @@ pub fn section(page: &mut Page, preds: &[PredictedMsf]) {
                 m.name.clone(),
                 if m.enabled { "yes" } else { "no" }.to_string(),
                 format!("{:.3e}", m.msf_band_rms_nm),
-                format!("{:.2} %", 100.0 * m.share),
+                format!("{} %", fixed(100.0 * m.share, 2)),
             ]);
         }
         page.table(&t);

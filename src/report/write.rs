@@ -91,6 +91,17 @@ impl Set {
         self.bytes(name, &data)
     }
 
+    /// Stages a height map in `fmt` (MetroPro `.dat`, CSV or EXR).
+    pub fn surface(
+        &mut self,
+        name: &str,
+        s: &bonnetlab_surface::Surface,
+        fmt: bonnetlab_io::MapFormat,
+    ) -> Result<(), WriteError> {
+        let data = bonnetlab_io::encode_surface(s, fmt).map_err(|e| werr(&self.path(name), e))?;
+        self.bytes(name, &data)
+    }
+
     /// Publishes every staged file.
     pub fn commit(self) -> Result<(), WriteError> {
         let dir = self.inner.dir().to_path_buf();

@@ -97,6 +97,22 @@ pub fn load_recipe(recipe_path: &Path) -> Result<Problem, PipelineError> {
         .map_err(|e| PipelineError::input(&recipe.before, e))?;
     let tool = ToolModel::from_source(&recipe.tif, spot.as_ref(), dx, dy)
         .map_err(|e| PipelineError::input(&spot_file, e))?;
+    // Samples outside the part plus the spot are refused here, before any grid is built from
+    // the path (the same check as `simulate`).
+    let grid = bonnetlab_process::Grid::of(&before)
+        .map_err(|e| PipelineError::input(&recipe.before, e))?;
+    let (ex, ey) = tool.field().half_extent_mm();
+    bonnetlab_process::path::log::check_extent(
+        &path,
+        &recipe.path_log,
+        (grid.x0_mm, grid.x_mm(grid.cols - 1)),
+        (grid.y0_mm, grid.y_mm(grid.rows - 1)),
+        // Overtravel beyond the spot (turnarounds off the part) is allowed up to one part
+        // length; anything further is a corrupt log.
+        ex.max(ey)
+            + (grid.x_mm(grid.cols - 1) - grid.x0_mm).max(grid.y_mm(grid.rows - 1) - grid.y0_mm),
+    )
+    .map_err(|e| PipelineError::input(&recipe.path_log, e))?;
     Problem::new(&before, &after, &TifMap::new(tool), &path).map_err(|e| match e {
         CalibrateError::Processing(m) => PipelineError {
             file: recipe_path.to_path_buf(),

@@ -55,6 +55,35 @@ const DETECT_BYTES: usize = 4096;
 
 /// Parses bytes already known to be in format `fmt`.
 pub fn parse_bytes(bytes: &[u8], fmt: MapFormat) -> Result<Surface, ParseError> {
+    let s = parse_format(bytes, fmt)?;
+    check_heights(&s)?;
+    Ok(s)
+}
+
+/// Largest height magnitude a map may hold, nm (1000 km). Beyond it a valid pixel is not a
+/// surface height but a corrupt value, and sums of its squares (RMS, form fits, PSDs) would
+/// overflow to a silent infinity or NaN: such a map is refused when read.
+pub const HEIGHT_LIMIT_NM: f64 = 1e15;
+
+fn check_heights(s: &Surface) -> Result<(), ParseError> {
+    let bad = s
+        .heights_nm()
+        .indexed_iter()
+        .zip(s.valid().iter())
+        .find(|((_, z), &v)| v && (z.is_nan() || z.abs() > HEIGHT_LIMIT_NM));
+    match bad {
+        Some((((i, j), z), _)) => Err(ParseError::Invalid(format!(
+            "height {} nm at row {}, column {} is beyond +/-{} nm: not a surface height",
+            bonnetlab_surface::format::sig(*z, 4),
+            i + 1,
+            j + 1,
+            bonnetlab_surface::format::sig(HEIGHT_LIMIT_NM, 1)
+        ))),
+        None => Ok(()),
+    }
+}
+
+fn parse_format(bytes: &[u8], fmt: MapFormat) -> Result<Surface, ParseError> {
     match fmt {
         MapFormat::MetroProDat => metropro_dat::parse(bytes),
         MapFormat::MetroProAsc => metropro_asc::parse(bytes),
@@ -65,31 +94,39 @@ pub fn parse_bytes(bytes: &[u8], fmt: MapFormat) -> Result<Surface, ParseError> 
     }
 }
 
+/// Encodes a surface in `fmt` (MetroPro `.dat`, CSV or EXR), for writing whole; the error
+/// says why the map cannot be written in that format.
+pub fn encode_surface(s: &Surface, fmt: MapFormat) -> Result<Vec<u8>, String> {
+    match fmt {
+        MapFormat::MetroProDat => metropro_dat_write::encode(s),
+        MapFormat::Exr => exr_map::encode(s),
+        MapFormat::Csv => {
+            let mut buf = Vec::new();
+            csv_grid::write(s, &mut buf).map_err(|e| e.to_string())?;
+            Ok(buf)
+        }
+        other => Err(format!(
+            "writing {} is not supported (write .dat, .csv or .exr)",
+            other.tag()
+        )),
+    }
+}
+
 /// Writes a surface atomically in `fmt` (MetroPro `.dat`, CSV or EXR).
 pub fn write_surface(path: &Path, s: &Surface, fmt: MapFormat) -> Result<(), IoError> {
-    let unrep = |what: String| IoError::Unrepresentable {
-        file: path.display().to_string(),
-        what,
-    };
-    let result = match fmt {
-        MapFormat::MetroProDat => {
-            let bytes = metropro_dat_write::encode(s).map_err(unrep)?;
-            atomic::write_atomic(path, &bytes)
-        }
-        MapFormat::Exr => {
-            let bytes = exr_map::encode(s).map_err(unrep)?;
-            atomic::write_atomic(path, &bytes)
-        }
-        MapFormat::Csv => atomic::write_atomic_with(path, |w| csv_grid::write(s, w)),
-        other => {
-            return Err(IoError::Unsupported {
-                file: path.display().to_string(),
-                what: format!(
-                    "writing {} is not supported (write .dat, .csv or .exr)",
-                    other.tag()
-                ),
-            })
-        }
-    };
-    result.map_err(|e| IoError::write(path, e))
+    if matches!(fmt, MapFormat::Csv) {
+        return atomic::write_atomic_with(path, |w| csv_grid::write(s, w))
+            .map_err(|e| IoError::write(path, e));
+    }
+    let bytes = encode_surface(s, fmt).map_err(|what| match fmt {
+        MapFormat::MetroProDat | MapFormat::Exr => IoError::Unrepresentable {
+            file: path.display().to_string(),
+            what,
+        },
+        _ => IoError::Unsupported {
+            file: path.display().to_string(),
+            what,
+        },
+    })?;
+    atomic::write_atomic(path, &bytes).map_err(|e| IoError::write(path, e))
 }

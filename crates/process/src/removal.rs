@@ -586,7 +586,16 @@ impl Default for ExactOptions {
     }
 }
 
+/// Most sub-steps [`deposit_exact`] walks (about a second of walking).
+const EXACT_MAX_SUBSTEPS: f64 = 1e9;
+/// Most pixel updates (sub-steps on the grid times footprint pixels) [`deposit_exact`] does
+/// (a few seconds on two cores).
+const EXACT_MAX_PIXEL_UPDATES: f64 = 4e9;
+/// Sub-steps deposited per block (24 MB of positions).
+const EXACT_BLOCK: usize = 1 << 20;
+
 /// Exact time-domain deposition: removal (nm) on `grid` of the rate field moved along the path.
+/// Refused, before anything is allocated, when the walk would exceed the limits above.
 pub fn deposit_exact(
     path: &PathLog,
     field: &dyn RateField,
@@ -608,37 +617,75 @@ pub fn deposit_exact(
     if !(step > 0.0 && step.is_finite()) {
         return Err(ProcessError::invalid("exact sub-step must be positive"));
     }
-    let mut steps: Vec<(f64, f64, f64)> = Vec::new();
     let (xlo, xhi) = (grid.x0_mm - ex, grid.x_mm(grid.cols - 1) + ex);
     let (ylo, yhi) = (grid.y0_mm - ey, grid.y_mm(grid.rows - 1) + ey);
-    let mut too_many = false;
+    // Count before allocating or depositing: every sub-step the walk visits, and (an upper
+    // bound) those on segments whose box meets the grid plus the footprint, each of which
+    // touches one footprint of pixels. A log resting for days or a footprint of millions of
+    // pixels is refused here, in microseconds, instead of exhausting memory or time.
+    let (mut walked, mut inside) = (0.0_f64, 0.0_f64);
+    for k in 0..path.len().saturating_sub(1) {
+        let (x0, y0, x1, y1) = (
+            path.x_mm[k],
+            path.y_mm[k],
+            path.x_mm[k + 1],
+            path.y_mm[k + 1],
+        );
+        let m = crate::path::substeps(
+            (x1 - x0).hypot(y1 - y0),
+            path.t_s[k + 1] - path.t_s[k],
+            step,
+            opts.max_dt_s,
+        ) as f64;
+        walked += m;
+        if x0.max(x1) >= xlo && x0.min(x1) <= xhi && y0.max(y1) >= ylo && y0.min(y1) <= yhi {
+            inside += m;
+        }
+    }
+    let footprint =
+        ((2.0 * ex / grid.dx_mm).floor() + 1.0) * ((2.0 * ey / grid.dy_mm).floor() + 1.0);
+    if walked > EXACT_MAX_SUBSTEPS || inside * footprint > EXACT_MAX_PIXEL_UPDATES {
+        return Err(ProcessError::invalid(format!(
+            "exact deposition would need {walked:.3e} sub-steps of at most {step:.3e} mm and \
+             {max_dt:.3e} s, {:.3e} pixel updates (limits {EXACT_MAX_SUBSTEPS:.0e} and \
+             {EXACT_MAX_PIXEL_UPDATES:.0e}): the path rests or runs too long for the exact \
+             method; use the fast method",
+            inside * footprint,
+            max_dt = opts.max_dt_s,
+        )));
+    }
+    // Deposit in blocks of at most EXACT_BLOCK sub-steps, so memory stays bounded whatever
+    // the path's length.
+    let g = *grid;
+    let zero = || Array2::<f64>::zeros((g.rows, g.cols));
+    let flush = |steps: &[(f64, f64, f64)], out: &mut Array2<f64>| {
+        let chunk = (steps.len() / (4 * rayon::current_num_threads()).max(1)).max(256);
+        let part = steps
+            .par_chunks(chunk)
+            .map(|c| {
+                let mut acc = zero();
+                for &(x, y, w) in c {
+                    deposit_one(&mut acc, &g, field, x, y, w, ex, ey);
+                }
+                acc
+            })
+            .reduce(zero, |a, b| a + b);
+        *out += &part;
+    };
+    let mut out = zero();
+    let mut steps: Vec<(f64, f64, f64)> = Vec::with_capacity((inside as usize).min(EXACT_BLOCK));
     path.for_each_substep(step, opts.max_dt_s, |x, y, dt, k, fr| {
         if x >= xlo && x <= xhi && y >= ylo && y <= yhi {
-            if steps.len() >= 200_000_000 {
-                too_many = true;
-                return;
-            }
             steps.push((x, y, dt * weight_at(weights, k, fr)));
+            if steps.len() == EXACT_BLOCK {
+                flush(&steps, &mut out);
+                steps.clear();
+            }
         }
     });
-    if too_many {
-        return Err(ProcessError::invalid(
-            "exact deposition would need more than 2e8 sub-steps",
-        ));
+    if !steps.is_empty() {
+        flush(&steps, &mut out);
     }
-    let g = *grid;
-    let chunk = (steps.len() / (4 * rayon::current_num_threads()).max(1)).max(256);
-    let zero = || Array2::<f64>::zeros((g.rows, g.cols));
-    let out = steps
-        .par_chunks(chunk)
-        .map(|c| {
-            let mut acc = zero();
-            for &(x, y, w) in c {
-                deposit_one(&mut acc, &g, field, x, y, w, ex, ey);
-            }
-            acc
-        })
-        .reduce(zero, |a, b| a + b);
     Ok(out)
 }
 

@@ -12,10 +12,14 @@ use crate::psd1d::Psd1d;
 pub const MSF_DEFAULT_PER_MM: (f64, f64) = crate::areal::BAND_EDGES_DEFAULT_PER_MM;
 
 /// A number with 4 significant digits, for reasons and captions (no exponent for the
-/// magnitudes of frequencies and lengths met here).
+/// magnitudes of frequencies and lengths met here; outside [1e-4, 1e7) the workspace's
+/// formatter, `bonnetlab_surface::format::sig`, so 1e300 is never 301 digits).
 pub fn fmt_sig(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
         return format!("{v}");
+    }
+    if !(1e-4..1e7).contains(&v.abs()) {
+        return bonnetlab_surface::format::sig(v, 4);
     }
     let digits = (3 - v.abs().log10().floor() as i32).clamp(0, 8) as usize;
     format!("{v:.digits$}")

@@ -10,6 +10,7 @@ pub mod basis;
 pub mod convergence;
 pub mod error;
 pub mod form;
+pub mod format;
 pub mod lsq;
 pub mod pvr;
 pub mod rng;

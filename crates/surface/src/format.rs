@@ -1,6 +1,8 @@
 //! Numbers for people: a value printed to the precision it carries, not the digits of its
 //! binary representation (a MetroPro pixel size stored as f32 0.4 prints as `0.4`, not
-//! `0.39999998989515007`). JSON keeps full precision; only human-facing text goes through here.
+//! `0.39999998989515007`, and 1e300 as `1e300`, not 301 digits). JSON keeps full precision; only
+//! human-facing text (terminal, HTML, error messages) goes through here. The one formatter of
+//! the workspace: `bonnetlab::report::format` re-exports it and the spectrum crate's reasons use it.
 
 /// `v` with at most `sig` significant digits, trailing zeros dropped; scientific notation
 /// outside [1e-4, 1e7). Non-finite values print as `NaN`, `inf`, `-inf`.
@@ -44,6 +46,17 @@ pub fn sig(v: f64, sig: usize) -> String {
     trim(&s)
 }
 
+/// `v` with `decimals` digits after the point, as `{v:.decimals$}` prints it, for table cells
+/// and summaries of ordinary magnitudes; from 1e7 up, [`sig`] with four significant digits
+/// (`1e300`, never 301 digits). Non-finite values print as `NaN`, `inf`, `-inf`.
+pub fn fixed(v: f64, decimals: usize) -> String {
+    if v.is_finite() && v.abs() < 1e7 {
+        format!("{v:.decimals$}")
+    } else {
+        sig(v, 4)
+    }
+}
+
 /// A length that came from a single-precision field (a pixel size): 7 significant digits.
 pub fn f32_value(v: f64) -> String {
     sig(v, 7)
@@ -83,5 +96,15 @@ mod tests {
         assert_eq!(sig(2.5e-6, 3), "2.5e-6");
         assert_eq!(sig(f64::NAN, 3), "NaN");
         assert_eq!(sig(1000.0, 4), "1000");
+        assert_eq!(sig(1e300, 4), "1e300");
+        assert_eq!(sig(-1e-300, 4), "-1e-300");
+    }
+
+    #[test]
+    fn fixed_decimals_never_print_hundreds_of_digits() {
+        assert_eq!(fixed(0.123456, 3), "0.123");
+        assert_eq!(fixed(1e300, 3), "1e300");
+        assert_eq!(fixed(-2.5e12, 1), "-2.5e12");
+        assert!(fixed(1e-300, 3).len() <= 6);
     }
 }
