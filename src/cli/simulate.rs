@@ -258,7 +258,7 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
         let input = CouplingInput {
             grid,
             valid: Some(before.valid()),
-            base_tif: tool.field(),
+            tool: &tool,
             path: &path,
             params: &params,
             pitch_mm: recipe.pitch_mm,

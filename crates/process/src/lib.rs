@@ -12,6 +12,7 @@ pub mod fft;
 pub mod grid;
 pub mod interp;
 pub mod path;
+pub mod perturb;
 pub mod recipe;
 pub mod removal;
 pub mod simulate;
