@@ -6,6 +6,7 @@
 //! removed); rates in nm/s; dwell in s (per pixel for maps, or s/mm^2 when said).
 
 pub mod channels;
+pub mod config;
 pub mod dwell;
 pub mod error;
 pub mod fft;
