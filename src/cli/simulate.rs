@@ -200,7 +200,7 @@ fn progress(n: u64) -> ProgressBar {
 fn verr(file: &Path, e: VibrationError) -> CliError {
     match e {
         VibrationError::InvalidParam { .. }
-        | VibrationError::UnknownKey(_)
+        | VibrationError::Table(_)
         | VibrationError::Conflict(..) => CliError::input(file, e),
         _ => CliError::processing(file, e),
     }
@@ -411,10 +411,7 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
 
 /// Whether the recipe file has a `[process]` table (the parsed recipe fills defaults).
 fn has_process_table(recipe_file: &Path) -> bool {
-    bonnetlab_io::input::read_text(recipe_file, bonnetlab_io::input::TEXT_LIMIT, "a recipe")
-        .ok()
-        .and_then(|t| t.parse::<toml::Table>().ok())
-        .is_some_and(|t| t.contains_key("process"))
+    bonnetlab_process::recipe::RecipeDoc::load(recipe_file).is_ok_and(|d| d.process.is_some())
 }
 
 /// A prediction (removal, after = before - removal) from a removal map on the before grid.

@@ -99,10 +99,9 @@ fn table_at(text: &str, offset: usize) -> (String, bool) {
     };
     if trimmed.starts_with('[') {
         // The unknown name is a segment of this header: its table is the header up to it.
-        let h = header(trimmed).unwrap_or_default();
         let col = offset - line_start;
         let name_end = line[col..]
-            .find(|c: char| c == '.' || c == ']')
+            .find(['.', ']'])
             .map_or(line.len(), |i| col + i);
         let upto = line[..name_end]
             .trim()
@@ -111,7 +110,6 @@ fn table_at(text: &str, offset: usize) -> (String, bool) {
             .map(|s| s.trim().trim_matches('"'))
             .collect::<Vec<_>>();
         let parent = upto[..upto.len().saturating_sub(1)].join(".");
-        let _ = h;
         return (parent, true);
     }
     let mut table = text[..line_start]
