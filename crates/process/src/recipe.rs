@@ -74,6 +74,9 @@ pub struct RecipeDoc {
     pub process: Option<ProcessTable>,
     /// Read by the vibration model (bonnetlab_vibration::params, typed and strict there).
     pub vibration: Option<Table>,
+    /// Informative: the physical parameters behind a `[tif]` model exported by `bonnetlab
+    /// spots` (`model_*.toml`, pasted whole into a recipe); not read.
+    pub spots_fit: Option<Table>,
 }
 
 /// `[measurement]`.
