@@ -100,9 +100,7 @@ fn table_at(text: &str, offset: usize) -> (String, bool) {
     if trimmed.starts_with('[') {
         // The unknown name is a segment of this header: its table is the header up to it.
         let col = offset - line_start;
-        let name_end = line[col..]
-            .find(['.', ']'])
-            .map_or(line.len(), |i| col + i);
+        let name_end = line[col..].find(['.', ']']).map_or(line.len(), |i| col + i);
         let upto = line[..name_end]
             .trim()
             .trim_start_matches('[')

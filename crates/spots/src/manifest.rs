@@ -146,12 +146,11 @@ pub fn read_manifest(path: &Path) -> Result<Manifest, SpotsError> {
 fn parse_toml(text: &str, base: &Path) -> Result<Manifest, SpotsError> {
     // Typed and strict: unknown tables / keys name the nearest valid name, wrong types what
     // was expected, syntax errors the parser's cause (bonnetlab_process::config).
-    let raw: RawManifest = bonnetlab_process::config::from_toml(text).map_err(|e| {
-        SpotsError::Manifest {
+    let raw: RawManifest =
+        bonnetlab_process::config::from_toml(text).map_err(|e| SpotsError::Manifest {
             at: e.key,
             what: e.what,
-        }
-    })?;
+        })?;
     let d = raw.defaults.unwrap_or_default();
     let mut spots = Vec::with_capacity(raw.spot.len());
     for (k, sp) in raw.spot.iter().enumerate() {
@@ -417,12 +416,18 @@ sweep = "offset_mm"
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 11") && e.contains("bonet"), "{e}");
-        assert!(e.contains("[spot] bonet") && e.contains("did you mean `bonnet`?"), "{e}");
+        assert!(
+            e.contains("[spot] bonet") && e.contains("did you mean `bonnet`?"),
+            "{e}"
+        );
         let bad = TOML.replace("[defaults]", "[defualts]");
         let e = parse_manifest(Path::new("m.toml"), &bad)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("[defualts]") && e.contains("did you mean [defaults]?"), "{e}");
+        assert!(
+            e.contains("[defualts]") && e.contains("did you mean [defaults]?"),
+            "{e}"
+        );
         let bad = TOML.replace("offset_mm = 0.2", "offset_mm = \"0.2\"");
         let e = parse_manifest(Path::new("m.toml"), &bad)
             .unwrap_err()
