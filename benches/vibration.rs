@@ -10,6 +10,8 @@
 //! Run: `cargo bench --bench vibration` (add `-- coupling` for the first only).
 
 use bonnetlab_process::path::RasterSpec;
+use bonnetlab_process::recipe::TifSource;
+use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::tif::GaussianTif;
 use bonnetlab_process::Grid;
 use bonnetlab_vibration::coupling::{fast_maps, CouplingInput, CouplingOptions};
@@ -22,6 +24,7 @@ use std::time::Duration;
 fn coupling(c: &mut Criterion) {
     let grid = Grid::new(1001, 1001, 0.1, 0.1, 0.0, 0.0).expect("grid");
     let tif = GaussianTif::new(2.0, 10.0, 10.0).expect("tif");
+    let tool = ToolModel::from_source(&TifSource::Gaussian(tif), None, 0.1, 0.1).expect("tool");
     let mut spec = RasterSpec::over_rect((0.0, 100.0), (0.0, 100.0), 3.0, 1.16);
     spec.overtravel_mm = 10.0;
     let path = spec.generate().expect("path");
@@ -29,7 +32,7 @@ fn coupling(c: &mut Criterion) {
     let input = CouplingInput {
         grid,
         valid: None,
-        base_tif: &tif,
+        tool: &tool,
         path: &path,
         params: &params,
         pitch_mm: Some(3.0),

@@ -10,6 +10,8 @@ use std::process::Command;
 
 use bonnetlab::io::{read_surface, write_surface, MapFormat};
 use bonnetlab::process::path::log::path_to_csv;
+use bonnetlab::process::recipe::TifSource;
+use bonnetlab::process::simulate::ToolModel;
 use bonnetlab::process::tif::GaussianTif;
 use bonnetlab::process::{read_path_csv, Grid, RasterSpec};
 use bonnetlab::surface::Surface;
@@ -64,15 +66,18 @@ fn simulate(recipe: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
 fn library_removal(d: &Path, bonnet: Bonnet) -> (Array2<f64>, Array2<f64>) {
     let before = read_surface(&d.join("before.dat")).unwrap();
     let path = read_path_csv(&d.join("path.csv")).unwrap();
+    let grid = Grid::of(&before).unwrap();
     let tif = GaussianTif::new(1.0, 8.0, 10.0).unwrap();
+    let tool =
+        ToolModel::from_source(&TifSource::Gaussian(tif), None, grid.dx_mm, grid.dy_mm).unwrap();
     let table: toml::Table = VIBRATION.parse().unwrap();
     let vib = table["vibration"].as_table().unwrap();
     let params =
         VibrationParams::from_parts(Some(vib), Some(1188.0), Some(0.6), Some(0.25), None).unwrap();
     let input = CouplingInput {
-        grid: Grid::of(&before).unwrap(),
+        grid,
         valid: Some(before.valid()),
-        base_tif: &tif,
+        tool: &tool,
         path: &path,
         params: &params,
         pitch_mm: Some(PITCH_MM),

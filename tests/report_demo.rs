@@ -140,7 +140,9 @@ fn same_numbers(a: &serde_json::Value, b: &serde_json::Value, at: &str) {
 #[test]
 fn predicted_msf_equals_the_vibration_crate() {
     use bonnetlab_process::path::RasterSpec;
-    use bonnetlab_process::tif::bonnet::{BonnetTif, BonnetTifParams};
+    use bonnetlab_process::recipe::TifSource;
+    use bonnetlab_process::simulate::ToolModel;
+    use bonnetlab_process::tif::bonnet::BonnetTifParams;
     use bonnetlab_process::Grid;
     use bonnetlab_vibration::coupling::{predict, CouplingInput, CouplingOptions};
     use bonnetlab_vibration::params::{Bonnet, VibrationParams};
@@ -156,7 +158,13 @@ fn predicted_msf_equals_the_vibration_crate() {
     assert_eq!(preds[1]["bonnet"], "suppression");
 
     let grid = Grid::new(250, 250, 0.4, 0.4, 0.2, 0.2).unwrap();
-    let tif = BonnetTif::new(&BonnetTifParams::paper(10.0)).unwrap();
+    let tool = ToolModel::from_source(
+        &TifSource::Bonnet(BonnetTifParams::paper(10.0)),
+        None,
+        0.4,
+        0.4,
+    )
+    .unwrap();
     let path = RasterSpec::over_rect((0.0, 100.0), (0.0, 100.0), 3.0, 1.6)
         .generate()
         .unwrap();
@@ -165,7 +173,7 @@ fn predicted_msf_equals_the_vibration_crate() {
     let input = CouplingInput {
         grid,
         valid: None,
-        base_tif: &tif,
+        tool: &tool,
         path: &path,
         params: &params,
         pitch_mm: Some(3.0),

@@ -20,7 +20,9 @@ use crate::report::samples::{
     generate, paper_bonnets, SAMPLE_N, SAMPLE_PITCH_MM, SAMPLE_PIXEL_MM, SAMPLE_SEED,
 };
 use bonnetlab_process::path::RasterSpec;
-use bonnetlab_process::tif::bonnet::{BonnetTif, BonnetTifParams};
+use bonnetlab_process::recipe::TifSource;
+use bonnetlab_process::simulate::ToolModel;
+use bonnetlab_process::tif::bonnet::BonnetTifParams;
 use bonnetlab_process::Grid;
 use bonnetlab_vibration::coupling::{predict_both, CouplingInput, CouplingOptions};
 use bonnetlab_vibration::params::VibrationParams;
@@ -94,7 +96,8 @@ pub fn predicted_msf() -> Result<Vec<PredictedMsf>, CliError> {
     let part_mm = n as f64 * d;
     let grid = Grid::new(n, n, d, d, 0.5 * d, 0.5 * d).map_err(|e| perr(&e))?;
     let tif_params = BonnetTifParams::paper(PREDICTION_TIF_PEAK_NM_PER_S);
-    let tif = BonnetTif::new(&tif_params).map_err(|e| perr(&e))?;
+    let tool = ToolModel::from_source(&TifSource::Bonnet(tif_params.clone()), None, d, d)
+        .map_err(|e| perr(&e))?;
     let path = RasterSpec::over_rect(
         (0.0, part_mm),
         (0.0, part_mm),
@@ -115,7 +118,7 @@ pub fn predicted_msf() -> Result<Vec<PredictedMsf>, CliError> {
     let input = CouplingInput {
         grid,
         valid: None,
-        base_tif: &tif,
+        tool: &tool,
         path: &path,
         params: &params,
         pitch_mm: Some(SAMPLE_PITCH_MM),

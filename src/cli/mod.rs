@@ -38,7 +38,7 @@ pub(crate) fn vibration_error(
         {
             CliError::input(file, format!("[process] {key}: {what}"))
         }
-        E::InvalidParam { .. } | E::UnknownKey(_) | E::Conflict(..) => CliError::input(file, e),
+        E::InvalidParam { .. } | E::Table(_) | E::Conflict(..) => CliError::input(file, e),
         _ => CliError::processing(file, e),
     }
 }

@@ -262,7 +262,7 @@ pub fn simulate_recipe(recipe_file: &Path, args: &Args) -> Result<Simulation, Cl
         let input = CouplingInput {
             grid,
             valid: Some(before.valid()),
-            base_tif: tool.field(),
+            tool: &tool,
             path: &path,
             params: &params,
             pitch_mm: recipe.pitch_mm,
@@ -448,10 +448,7 @@ fn nominal(
 
 /// Whether the recipe file has a `[process]` table (the parsed recipe fills defaults).
 fn has_process_table(recipe_file: &Path) -> bool {
-    bonnetlab_io::input::read_text(recipe_file, bonnetlab_io::input::TEXT_LIMIT, "a recipe")
-        .ok()
-        .and_then(|t| t.parse::<toml::Table>().ok())
-        .is_some_and(|t| t.contains_key("process"))
+    bonnetlab_process::recipe::RecipeDoc::load(recipe_file).is_ok_and(|d| d.process.is_some())
 }
 
 /// A prediction (removal, after = before - removal) from a removal map on the before grid.

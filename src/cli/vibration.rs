@@ -15,6 +15,7 @@
 use super::CliError;
 use crate::report::format::fixed;
 use crate::report::plot::{LinePlot, Series};
+use bonnetlab_process::recipe::RecipeDoc;
 use bonnetlab_vibration::modal::{crossed_modes, Crossing, MODES, SPINDLE_BAND_RPM};
 use bonnetlab_vibration::params::{Bonnet, LateralAxis, VibrationParams};
 use bonnetlab_vibration::response::{
@@ -100,43 +101,37 @@ fn bonnet_out(p: &VibrationParams, bonnet: Bonnet) -> BonnetOut {
     }
 }
 
-fn read_recipe(path: &Path) -> Result<toml::Table, CliError> {
+fn read_recipe(path: &Path) -> Result<RecipeDoc, CliError> {
     let text = super::read_text_input(path, "a recipe (TOML)")?;
-    text.parse::<toml::Table>().map_err(|e| {
-        CliError::input(
-            path,
-            format!(
-                "not valid TOML: {}",
-                e.to_string().lines().next().unwrap_or("")
-            ),
-        )
-    })
+    RecipeDoc::parse(&text, path).map_err(|e| CliError::input(path, recipe_error(e)))
+}
+
+/// The recipe error without the file name (CliError::input adds it).
+fn recipe_error(e: bonnetlab_process::ProcessError) -> String {
+    match e {
+        bonnetlab_process::ProcessError::Recipe { key, what, .. } => format!("{key}: {what}"),
+        other => other.to_string(),
+    }
 }
 
 pub fn run(args: &Args) -> Result<(), CliError> {
     let doc = match &args.recipe {
         Some(p) => read_recipe(p)?,
-        None => toml::Table::new(),
+        None => RecipeDoc::default(),
     };
     let name = args
         .recipe
         .clone()
         .unwrap_or_else(|| PathBuf::from("(defaults)"));
-    let params = VibrationParams::from_recipe(&doc).map_err(|e| {
-        super::vibration_error(&name, doc.get("vibration").and_then(|v| v.as_table()), e)
-    })?;
+    let params = VibrationParams::from_recipe(&doc)
+        .map_err(|e| super::vibration_error(&name, doc.vibration.as_ref(), e))?;
     let recipe_bonnet = doc
-        .get("process")
-        .and_then(|p| p.get("bonnet"))
-        .map(|b| {
-            b.as_str()
-                .ok_or_else(|| CliError::input(&name, "[process] bonnet: expected a string"))
-        })
-        .transpose()?;
+        .bonnet(&name)
+        .map_err(|e| CliError::input(&name, recipe_error(e)))?;
     let choice = args
         .bonnet
         .as_deref()
-        .or(recipe_bonnet)
+        .or(recipe_bonnet.as_deref())
         .unwrap_or("original");
     let bonnets: Vec<Bonnet> = if choice.eq_ignore_ascii_case("both") {
         Bonnet::ALL.to_vec()
@@ -278,17 +273,13 @@ fn write_plots(p: &VibrationParams, dir: &Path) -> Result<(), CliError> {
 
 /// Reversal pulses from the first `duration_s` of the recipe's path log, if it names one.
 fn path_pulses(
-    doc: &toml::Table,
+    doc: &RecipeDoc,
     recipe: Option<&Path>,
     p: &VibrationParams,
     duration_s: f64,
 ) -> Result<Vec<AccelPulse>, CliError> {
-    let (Some(recipe), Some(log)) = (
-        recipe,
-        doc.get("path")
-            .and_then(|t| t.get("log"))
-            .and_then(|l| l.as_str()),
-    ) else {
+    let (Some(recipe), Some(log)) = (recipe, doc.path.as_ref().and_then(|p| p.log.as_deref()))
+    else {
         return Ok(Vec::new());
     };
     let file = recipe.parent().unwrap_or(Path::new(".")).join(log);

@@ -6,6 +6,7 @@
 //! removed); rates in nm/s; dwell in s (per pixel for maps, or s/mm^2 when said).
 
 pub mod channels;
+pub mod config;
 pub mod dwell;
 pub mod error;
 pub mod fft;
@@ -13,6 +14,7 @@ pub mod grid;
 pub mod interp;
 pub mod modulated;
 pub mod path;
+pub mod perturb;
 pub mod recipe;
 pub mod removal;
 pub mod simulate;

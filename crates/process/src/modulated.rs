@@ -155,7 +155,16 @@ pub fn deposit_exact_modulated(
             let mut acc = zero();
             for &[x, y, w, s] in c {
                 let wf = Widened { inner: field, s };
-                deposit_one(&mut acc, &g, &wf, x, y, w, ex * s, ey * s);
+                deposit_one(
+                    &mut acc,
+                    &g,
+                    |dx, dy| wf.rate_at_mm(dx, dy),
+                    x,
+                    y,
+                    w,
+                    ex * s,
+                    ey * s,
+                );
             }
             acc
         })

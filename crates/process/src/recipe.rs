@@ -9,12 +9,16 @@
 //!   values; `radius_mm` defaults to 20 mm (the paper's bonnet); `pressure` to "hertz";
 //!   `precession_steps` to 4; the rate is `peak_rate_nm_per_s` or `volume_rate_nm_mm2_per_s`.
 //! - `[process] bonnet` must be "original" or "suppression" when given (default "original").
-//! - `[vibration]` is kept as a raw table for the vibration model.
+//! - `[vibration]` is kept as a raw table for the vibration model, which reads it typed and
+//!   strictly (bonnetlab_vibration::params).
+//! - Every table and key is typed ([`RecipeDoc`], read with serde through [`crate::config`]):
+//!   an unknown table or key is an error naming the nearest valid name, a wrong type says what
+//!   was expected, a TOML syntax error gives the parser's cause with line and column.
 
 use std::path::{Path, PathBuf};
 
-use serde::Serialize;
-use toml::{Table, Value};
+use serde::{Deserialize, Serialize};
+use toml::Table;
 
 use crate::error::ProcessError;
 use crate::tif::{BonnetTifParams, GaussianTif, PressureProfile, RateScale};
@@ -57,6 +61,127 @@ pub struct Recipe {
     pub vibration: Option<Table>,
 }
 
+/// The recipe document as written, every table typed and strict (unknown tables and keys are
+/// errors naming the nearest valid name, see [`crate::config`]); every table and key is
+/// optional here, [`Recipe::parse`] checks what a run needs. Commands that read only part of a
+/// recipe (`bonnetlab vibration`) read this.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RecipeDoc {
+    pub measurement: Option<MeasurementTable>,
+    pub tif: Option<TifTable>,
+    pub path: Option<PathTable>,
+    pub process: Option<ProcessTable>,
+    /// Read by the vibration model (bonnetlab_vibration::params, typed and strict there).
+    pub vibration: Option<Table>,
+    /// Informative: the physical parameters behind a `[tif]` model exported by `bonnetlab
+    /// spots` (`model_*.toml`, pasted whole into a recipe); not read.
+    pub spots_fit: Option<Table>,
+}
+
+/// `[measurement]`.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeasurementTable {
+    pub before: Option<String>,
+    pub after: Option<String>,
+}
+
+/// `[tif]`: a measured spot (`spot`, `dwell_s`) or a `model`.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TifTable {
+    pub spot: Option<String>,
+    pub dwell_s: Option<f64>,
+    pub model: Option<ModelTable>,
+}
+
+/// `[tif] model = { kind = ... }`: the keys of both kinds (a key of the other kind is an error).
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelTable {
+    pub kind: Option<String>,
+    pub sigma_mm: Option<f64>,
+    pub diameter_mm: Option<f64>,
+    pub peak_rate_nm_per_s: Option<f64>,
+    pub volume_rate_nm_mm2_per_s: Option<f64>,
+    pub radius_mm: Option<f64>,
+    pub offset_mm: Option<f64>,
+    pub precession_deg: Option<f64>,
+    pub spindle_rpm: Option<f64>,
+    pub pressure: Option<String>,
+    pub precession_steps: Option<f64>,
+}
+
+/// `[path]`.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PathTable {
+    pub log: Option<String>,
+    pub pitch_mm: Option<f64>,
+}
+
+/// `[process]`.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProcessTable {
+    pub bonnet: Option<String>,
+    pub spindle_rpm: Option<f64>,
+    pub offset_mm: Option<f64>,
+    pub precession_deg: Option<f64>,
+    pub inner_pressure_mpa: Option<f64>,
+}
+
+impl RecipeDoc {
+    /// Reads recipe text strictly; errors name `file` and the key.
+    pub fn parse(text: &str, file: &Path) -> Result<RecipeDoc, ProcessError> {
+        crate::config::from_toml(text).map_err(|e| ProcessError::Recipe {
+            file: file.to_path_buf(),
+            key: e.key,
+            what: e.what,
+        })
+    }
+
+    /// Reads a recipe file strictly.
+    pub fn load(path: &Path) -> Result<RecipeDoc, ProcessError> {
+        RecipeDoc::parse(&read_recipe_text(path)?, path)
+    }
+
+    /// `[process] bonnet` lower-cased, checked to be "original" or "suppression".
+    pub fn bonnet(&self, file: &Path) -> Result<Option<String>, ProcessError> {
+        let Some(b) = self.process.as_ref().and_then(|p| p.bonnet.as_ref()) else {
+            return Ok(None);
+        };
+        let b = b.to_ascii_lowercase();
+        if b != "original" && b != "suppression" {
+            return Err(ProcessError::Recipe {
+                file: file.to_path_buf(),
+                key: "[process] bonnet".into(),
+                what: format!("must be \"original\" or \"suppression\", got \"{b}\""),
+            });
+        }
+        Ok(Some(b))
+    }
+
+    /// The bonnet TIF model's radius, when the recipe gives one.
+    pub fn bonnet_radius_mm(&self) -> Option<f64> {
+        let m = self.tif.as_ref()?.model.as_ref()?;
+        if m.kind.as_deref().map(str::to_ascii_lowercase).as_deref() == Some("bonnet") {
+            m.radius_mm
+        } else {
+            None
+        }
+    }
+}
+
+fn read_recipe_text(path: &Path) -> Result<String, ProcessError> {
+    bonnetlab_io::input::read_text(path, bonnetlab_io::input::TEXT_LIMIT, "a recipe (TOML)")
+        .map_err(|e| ProcessError::Io {
+            file: path.to_path_buf(),
+            what: e.to_string(),
+        })
+}
+
 struct Ctx<'a> {
     file: &'a Path,
     dir: PathBuf,
@@ -71,165 +196,100 @@ impl Ctx<'_> {
         }
     }
 
-    fn table<'t>(
-        &self,
-        root: &'t Table,
-        name: &str,
-        required: bool,
-    ) -> Result<Option<&'t Table>, ProcessError> {
-        match root.get(name) {
-            None if required => Err(self.err(&format!("[{name}]"), "missing table")),
-            None => Ok(None),
-            Some(Value::Table(t)) => Ok(Some(t)),
-            Some(_) => Err(self.err(&format!("[{name}]"), "must be a table")),
-        }
-    }
-
-    fn num(&self, t: &Table, tname: &str, key: &str) -> Result<Option<f64>, ProcessError> {
-        let k = format!("[{tname}] {key}");
-        match t.get(key) {
-            None => Ok(None),
-            Some(Value::Float(f)) if f.is_finite() => Ok(Some(*f)),
-            Some(Value::Integer(i)) => Ok(Some(*i as f64)),
-            Some(Value::Float(_)) => Err(self.err(&k, "must be a finite number")),
-            Some(v) => Err(self.err(&k, format!("must be a number, got {}", v.type_str()))),
-        }
-    }
-
-    fn positive(&self, t: &Table, tname: &str, key: &str) -> Result<Option<f64>, ProcessError> {
-        match self.num(t, tname, key)? {
-            Some(v) if v <= 0.0 => Err(self.err(
-                &format!("[{tname}] {key}"),
-                format!("must be positive, got {v}"),
-            )),
+    fn finite(&self, v: Option<f64>, key: &str) -> Result<Option<f64>, ProcessError> {
+        match v {
+            Some(x) if !x.is_finite() => Err(self.err(key, "must be a finite number")),
             other => Ok(other),
         }
     }
 
-    fn req_positive(&self, t: &Table, tname: &str, key: &str) -> Result<f64, ProcessError> {
-        self.positive(t, tname, key)?
-            .ok_or_else(|| self.err(&format!("[{tname}] {key}"), "missing"))
-    }
-
-    fn string<'t>(
-        &self,
-        t: &'t Table,
-        tname: &str,
-        key: &str,
-    ) -> Result<Option<&'t str>, ProcessError> {
-        match t.get(key) {
-            None => Ok(None),
-            Some(Value::String(s)) => Ok(Some(s.as_str())),
-            Some(v) => Err(self.err(
-                &format!("[{tname}] {key}"),
-                format!("must be a string, got {}", v.type_str()),
-            )),
+    fn positive(&self, v: Option<f64>, key: &str) -> Result<Option<f64>, ProcessError> {
+        match self.finite(v, key)? {
+            Some(x) if x <= 0.0 => Err(self.err(key, format!("must be positive, got {x}"))),
+            other => Ok(other),
         }
     }
 
-    fn file_path(
-        &self,
-        t: &Table,
-        tname: &str,
-        key: &str,
-    ) -> Result<Option<PathBuf>, ProcessError> {
-        Ok(self.string(t, tname, key)?.map(|s| {
+    fn req_positive(&self, v: Option<f64>, key: &str) -> Result<f64, ProcessError> {
+        self.positive(v, key)?
+            .ok_or_else(|| self.err(key, "missing"))
+    }
+
+    fn file_path(&self, s: Option<&String>) -> Option<PathBuf> {
+        s.map(|s| {
             let p = Path::new(s);
             if p.is_absolute() {
                 p.to_path_buf()
             } else {
                 self.dir.join(p)
             }
-        }))
+        })
     }
 }
 
 impl Recipe {
     /// Reads and validates a recipe file.
     pub fn load(path: &Path) -> Result<Recipe, ProcessError> {
-        let text = bonnetlab_io::input::read_text(
-            path,
-            bonnetlab_io::input::TEXT_LIMIT,
-            "a recipe (TOML)",
-        )
-        .map_err(|e| ProcessError::Io {
-            file: path.to_path_buf(),
-            what: e.to_string(),
-        })?;
-        Recipe::parse(&text, path)
+        Recipe::parse(&read_recipe_text(path)?, path)
     }
 
     /// Parses recipe text; `path` names the file in errors and anchors relative paths.
     pub fn parse(text: &str, path: &Path) -> Result<Recipe, ProcessError> {
+        Recipe::from_doc(RecipeDoc::parse(text, path)?, path)
+    }
+
+    /// Validates a typed recipe document; `path` names the file and anchors relative paths.
+    pub fn from_doc(doc: RecipeDoc, path: &Path) -> Result<Recipe, ProcessError> {
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         let cx = Ctx { file: path, dir };
-        let root: Table = text.parse::<Table>().map_err(|e| {
-            let msg = e
-                .to_string()
-                .lines()
-                .next()
-                .unwrap_or("invalid TOML")
-                .to_string();
-            cx.err("TOML", msg)
-        })?;
-        let m = cx
-            .table(&root, "measurement", true)?
+        let bonnet = doc.bonnet(path)?.unwrap_or_else(|| "original".into());
+        let m = doc
+            .measurement
+            .as_ref()
             .ok_or_else(|| cx.err("[measurement]", "missing table"))?;
         let before = cx
-            .file_path(m, "measurement", "before")?
+            .file_path(m.before.as_ref())
             .ok_or_else(|| cx.err("[measurement] before", "missing"))?;
-        let after = cx.file_path(m, "measurement", "after")?;
+        let after = cx.file_path(m.after.as_ref());
 
-        let empty = Table::new();
-        let proc_t = cx.table(&root, "process", false)?.unwrap_or(&empty);
-        let bonnet = cx
-            .string(proc_t, "process", "bonnet")?
-            .unwrap_or("original")
-            .to_ascii_lowercase();
-        if bonnet != "original" && bonnet != "suppression" {
-            return Err(cx.err(
-                "[process] bonnet",
-                format!("must be \"original\" or \"suppression\", got \"{bonnet}\""),
-            ));
-        }
+        let pt = doc.process.clone().unwrap_or_default();
         let process = ProcessParams {
             bonnet,
-            spindle_rpm: cx.positive(proc_t, "process", "spindle_rpm")?,
-            offset_mm: cx.positive(proc_t, "process", "offset_mm")?,
-            precession_deg: cx.num(proc_t, "process", "precession_deg")?,
-            inner_pressure_mpa: cx.positive(proc_t, "process", "inner_pressure_mpa")?,
+            spindle_rpm: cx.positive(pt.spindle_rpm, "[process] spindle_rpm")?,
+            offset_mm: cx.positive(pt.offset_mm, "[process] offset_mm")?,
+            precession_deg: cx.finite(pt.precession_deg, "[process] precession_deg")?,
+            inner_pressure_mpa: cx
+                .positive(pt.inner_pressure_mpa, "[process] inner_pressure_mpa")?,
         };
 
-        let t = cx
-            .table(&root, "tif", true)?
+        let t = doc
+            .tif
+            .as_ref()
             .ok_or_else(|| cx.err("[tif]", "missing table"))?;
-        let tif = match (t.get("spot"), t.get("model")) {
+        let tif = match (&t.spot, &t.model) {
             (Some(_), Some(_)) => {
                 return Err(cx.err("[tif]", "give either spot + dwell_s or model, not both"))
             }
             (None, None) => return Err(cx.err("[tif]", "missing spot (with dwell_s) or model")),
             (Some(_), None) => {
                 let p = cx
-                    .file_path(t, "tif", "spot")?
+                    .file_path(t.spot.as_ref())
                     .ok_or_else(|| cx.err("[tif] spot", "missing"))?;
-                let dwell_s = cx.req_positive(t, "tif", "dwell_s")?;
+                let dwell_s = cx.req_positive(t.dwell_s, "[tif] dwell_s")?;
                 TifSource::Spot { path: p, dwell_s }
             }
-            (None, Some(Value::Table(mt))) => parse_model(&cx, mt, &process)?,
-            (None, Some(_)) => {
-                return Err(cx.err("[tif] model", "must be an inline table { kind = ... }"))
-            }
+            (None, Some(mt)) => parse_model(&cx, mt, &process)?,
         };
 
-        let pt = cx
-            .table(&root, "path", true)?
+        let pt = doc
+            .path
+            .as_ref()
             .ok_or_else(|| cx.err("[path]", "missing table"))?;
         let path_log = cx
-            .file_path(pt, "path", "log")?
+            .file_path(pt.log.as_ref())
             .ok_or_else(|| cx.err("[path] log", "missing"))?;
-        let pitch_mm = cx.positive(pt, "path", "pitch_mm")?;
+        let pitch_mm = cx.positive(pt.pitch_mm, "[path] pitch_mm")?;
 
-        let vibration = cx.table(&root, "vibration", false)?.cloned();
         Ok(Recipe {
             file: path.to_path_buf(),
             before,
@@ -238,26 +298,59 @@ impl Recipe {
             path_log,
             pitch_mm,
             process,
-            vibration,
+            vibration: doc.vibration,
         })
     }
 }
 
-fn parse_model(cx: &Ctx, mt: &Table, process: &ProcessParams) -> Result<TifSource, ProcessError> {
-    let tn = "tif.model";
-    let kind = cx
-        .string(mt, tn, "kind")?
-        .ok_or_else(|| cx.err("[tif.model] kind", "missing"))?;
-    match kind.to_ascii_lowercase().as_str() {
+fn parse_model(
+    cx: &Ctx,
+    mt: &ModelTable,
+    process: &ProcessParams,
+) -> Result<TifSource, ProcessError> {
+    let kind = mt
+        .kind
+        .as_deref()
+        .ok_or_else(|| cx.err("[tif.model] kind", "missing"))?
+        .to_ascii_lowercase();
+    // Keys of the other kind are errors, not silently ignored.
+    let given = |pairs: &[(&str, bool)]| -> Result<(), ProcessError> {
+        match pairs.iter().find(|p| p.1) {
+            Some((k, _)) => Err(cx.err(
+                &format!("[tif.model] {k}"),
+                format!("is not a key of a {kind} model"),
+            )),
+            None => Ok(()),
+        }
+    };
+    match kind.as_str() {
         "gaussian" => {
-            let sigma = cx.req_positive(mt, tn, "sigma_mm")?;
-            let peak = cx.req_positive(mt, tn, "peak_rate_nm_per_s")?;
-            let d = cx.positive(mt, tn, "diameter_mm")?.unwrap_or(6.0 * sigma);
+            given(&[
+                (
+                    "volume_rate_nm_mm2_per_s",
+                    mt.volume_rate_nm_mm2_per_s.is_some(),
+                ),
+                ("radius_mm", mt.radius_mm.is_some()),
+                ("offset_mm", mt.offset_mm.is_some()),
+                ("precession_deg", mt.precession_deg.is_some()),
+                ("spindle_rpm", mt.spindle_rpm.is_some()),
+                ("pressure", mt.pressure.is_some()),
+                ("precession_steps", mt.precession_steps.is_some()),
+            ])?;
+            let sigma = cx.req_positive(mt.sigma_mm, "[tif.model] sigma_mm")?;
+            let peak = cx.req_positive(mt.peak_rate_nm_per_s, "[tif.model] peak_rate_nm_per_s")?;
+            let d = cx
+                .positive(mt.diameter_mm, "[tif.model] diameter_mm")?
+                .unwrap_or(6.0 * sigma);
             GaussianTif::new(sigma, d, peak)
                 .map(TifSource::Gaussian)
                 .map_err(|e| cx.err("[tif.model]", e.to_string()))
         }
         "bonnet" => {
+            given(&[
+                ("sigma_mm", mt.sigma_mm.is_some()),
+                ("diameter_mm", mt.diameter_mm.is_some()),
+            ])?;
             let or = |v: Option<f64>, from: Option<f64>, key: &str| {
                 v.or(from).ok_or_else(|| {
                     cx.err(
@@ -266,7 +359,7 @@ fn parse_model(cx: &Ctx, mt: &Table, process: &ProcessParams) -> Result<TifSourc
                     )
                 })
             };
-            let pressure = match cx.string(mt, tn, "pressure")? {
+            let pressure = match mt.pressure.as_deref() {
                 None => PressureProfile::Hertz,
                 Some(s) => PressureProfile::parse(s).ok_or_else(|| {
                     cx.err(
@@ -276,8 +369,11 @@ fn parse_model(cx: &Ctx, mt: &Table, process: &ProcessParams) -> Result<TifSourc
                 })?,
             };
             let scale = match (
-                cx.positive(mt, tn, "peak_rate_nm_per_s")?,
-                cx.positive(mt, tn, "volume_rate_nm_mm2_per_s")?,
+                cx.positive(mt.peak_rate_nm_per_s, "[tif.model] peak_rate_nm_per_s")?,
+                cx.positive(
+                    mt.volume_rate_nm_mm2_per_s,
+                    "[tif.model] volume_rate_nm_mm2_per_s",
+                )?,
             ) {
                 (Some(p), None) => RateScale::PeakNmPerS(p),
                 (None, Some(v)) => RateScale::VolumeNmMm2PerS(v),
@@ -288,7 +384,7 @@ fn parse_model(cx: &Ctx, mt: &Table, process: &ProcessParams) -> Result<TifSourc
                     ))
                 }
             };
-            let steps = match cx.num(mt, tn, "precession_steps")? {
+            let steps = match mt.precession_steps {
                 None => 4,
                 Some(v) if (1.0..=360.0).contains(&v) && v.fract() == 0.0 => v as usize,
                 Some(v) => {
@@ -299,19 +395,21 @@ fn parse_model(cx: &Ctx, mt: &Table, process: &ProcessParams) -> Result<TifSourc
                 }
             };
             let p = BonnetTifParams {
-                radius_mm: cx.positive(mt, tn, "radius_mm")?.unwrap_or(20.0),
+                radius_mm: cx
+                    .positive(mt.radius_mm, "[tif.model] radius_mm")?
+                    .unwrap_or(20.0),
                 offset_mm: or(
-                    cx.positive(mt, tn, "offset_mm")?,
+                    cx.positive(mt.offset_mm, "[tif.model] offset_mm")?,
                     process.offset_mm,
                     "offset_mm",
                 )?,
                 precession_deg: or(
-                    cx.num(mt, tn, "precession_deg")?,
+                    cx.finite(mt.precession_deg, "[tif.model] precession_deg")?,
                     process.precession_deg,
                     "precession_deg",
                 )?,
                 spindle_rpm: or(
-                    cx.positive(mt, tn, "spindle_rpm")?,
+                    cx.positive(mt.spindle_rpm, "[tif.model] spindle_rpm")?,
                     process.spindle_rpm,
                     "spindle_rpm",
                 )?,
@@ -323,10 +421,15 @@ fn parse_model(cx: &Ctx, mt: &Table, process: &ProcessParams) -> Result<TifSourc
                 .map_err(|e| cx.err("[tif.model]", e.to_string()))?;
             Ok(TifSource::Bonnet(p))
         }
-        other => Err(cx.err(
-            "[tif.model] kind",
-            format!("must be \"gaussian\" or \"bonnet\", got \"{other}\""),
-        )),
+        other => {
+            let hint = crate::config::nearest(other, &["gaussian", "bonnet"])
+                .map(|n| format!("; did you mean \"{n}\"?"))
+                .unwrap_or_default();
+            Err(cx.err(
+                "[tif.model] kind",
+                format!("must be \"gaussian\" or \"bonnet\", got \"{other}\"{hint}"),
+            ))
+        }
     }
 }
 

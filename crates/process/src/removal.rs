@@ -665,7 +665,16 @@ pub fn deposit_exact(
             .map(|c| {
                 let mut acc = zero();
                 for &(x, y, w) in c {
-                    deposit_one(&mut acc, &g, field, x, y, w, ex, ey);
+                    deposit_one(
+                        &mut acc,
+                        &g,
+                        |dx, dy| field.rate_at_mm(dx, dy),
+                        x,
+                        y,
+                        w,
+                        ex,
+                        ey,
+                    );
                 }
                 acc
             })
@@ -689,11 +698,14 @@ pub fn deposit_exact(
     Ok(out)
 }
 
+/// Adds `w` times the rate at every pixel within (ex, ey) mm of the tool centre (x, y);
+/// `rate(dx, dy)` is evaluated at the pixel's offset from the centre. Shared by the exact
+/// depositions (here and [`crate::perturb::deposit_perturbed`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn deposit_one(
     acc: &mut Array2<f64>,
     g: &Grid,
-    field: &dyn RateField,
+    rate: impl Fn(f64, f64) -> f64,
     x: f64,
     y: f64,
     w: f64,
@@ -715,7 +727,7 @@ pub(crate) fn deposit_one(
         let oy = g.y_mm(i) - y;
         let mut row = acc.row_mut(i);
         for j in j0..=j1 as usize {
-            row[j] += w * field.rate_at_mm(g.x_mm(j) - x, oy);
+            row[j] += w * rate(g.x_mm(j) - x, oy);
         }
     }
 }

@@ -144,10 +144,13 @@ pub fn read_manifest(path: &Path) -> Result<Manifest, SpotsError> {
 }
 
 fn parse_toml(text: &str, base: &Path) -> Result<Manifest, SpotsError> {
-    let raw: RawManifest = toml::from_str(text).map_err(|e| {
-        let line = e.span().map(|s| line_of(text, s.start)).unwrap_or(1);
-        err(line, e.message().trim().replace('\n', " "))
-    })?;
+    // Typed and strict: unknown tables / keys name the nearest valid name, wrong types what
+    // was expected, syntax errors the parser's cause (bonnetlab_process::config).
+    let raw: RawManifest =
+        bonnetlab_process::config::from_toml(text).map_err(|e| SpotsError::Manifest {
+            at: e.key,
+            what: e.what,
+        })?;
     let d = raw.defaults.unwrap_or_default();
     let mut spots = Vec::with_capacity(raw.spot.len());
     for (k, sp) in raw.spot.iter().enumerate() {
@@ -413,6 +416,23 @@ sweep = "offset_mm"
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 11") && e.contains("bonet"), "{e}");
+        assert!(
+            e.contains("[spot] bonet") && e.contains("did you mean `bonnet`?"),
+            "{e}"
+        );
+        let bad = TOML.replace("[defaults]", "[defualts]");
+        let e = parse_manifest(Path::new("m.toml"), &bad)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("[defualts]") && e.contains("did you mean [defaults]?"),
+            "{e}"
+        );
+        let bad = TOML.replace("offset_mm = 0.2", "offset_mm = \"0.2\"");
+        let e = parse_manifest(Path::new("m.toml"), &bad)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("[spot] offset_mm: expected a number"), "{e}");
         assert!(!e.contains('\n'));
     }
 

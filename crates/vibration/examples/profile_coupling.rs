@@ -2,11 +2,12 @@
 //! 1 kHz): `cargo run --release -p bonnetlab-vibration --example profile_coupling`.
 
 use bonnetlab_process::path::RasterSpec;
+use bonnetlab_process::perturb::{DerivativeKernels, WeightedDwell};
+use bonnetlab_process::recipe::TifSource;
+use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::tif::GaussianTif;
 use bonnetlab_process::Grid;
-use bonnetlab_vibration::coupling::fast::executed_path;
-use bonnetlab_vibration::coupling::instant::{InstantTif, Kernels};
-use bonnetlab_vibration::coupling::splat::DwellChannels;
+use bonnetlab_vibration::coupling::fast::{axis, executed_path, offset_tif};
 use bonnetlab_vibration::coupling::stream::SampleStream;
 use bonnetlab_vibration::coupling::{fast_maps, CouplingInput, CouplingOptions, Mechanisms};
 use bonnetlab_vibration::params::{Bonnet, VibrationParams};
@@ -15,6 +16,7 @@ use std::time::Instant;
 fn main() {
     let grid = Grid::new(1001, 1001, 0.1, 0.1, 0.0, 0.0).expect("grid");
     let tif = GaussianTif::new(2.0, 10.0, 10.0).expect("tif");
+    let tool = ToolModel::from_source(&TifSource::Gaussian(tif), None, 0.1, 0.1).expect("tool");
     let mut spec = RasterSpec::over_rect((0.0, 100.0), (0.0, 100.0), 3.0, 1.16);
     spec.overtravel_mm = 10.0;
     let path = spec.generate().expect("path");
@@ -22,16 +24,16 @@ fn main() {
     let input = CouplingInput {
         grid,
         valid: None,
-        base_tif: &tif,
+        tool: &tool,
         path: &path,
         params: &params,
         pitch_mm: Some(3.0),
     };
     let opts = CouplingOptions::default();
     let t = Instant::now();
-    let inst = InstantTif::new(&tif, &params);
-    let k = Kernels::sample(&inst, 0.1, 0.1, params.lateral_axis);
-    eprintln!("kernels {:?} ({:?})", t.elapsed(), k.k0.dim());
+    let inst = offset_tif(&tif, &params);
+    let k = DerivativeKernels::sample(&inst, 0.1, 0.1, axis(params.lateral_axis));
+    eprintln!("kernels {:?} ({:?})", t.elapsed(), k.kh.dim());
     let t = Instant::now();
     let exec = executed_path(&input, &Mechanisms::ALL).expect("exec");
     eprintln!("executed path {:?} ({} nodes)", t.elapsed(), exec.len());
@@ -54,8 +56,7 @@ fn main() {
     eprintln!("stream {:?} ({n} samples, {acc:.3e})", t.elapsed());
     let t = Instant::now();
     let ext = grid.grown(k.half.0, k.half.1);
-    let mut c0 = DwellChannels::<1>::new(ext);
-    let mut c8 = DwellChannels::<8>::new(ext);
+    let mut c8 = WeightedDwell::<8>::new(ext);
     for s in SampleStream::new(
         &exec,
         &params,
@@ -66,8 +67,7 @@ fn main() {
     )
     .expect("stream")
     {
-        c0.add(s.x_mm, s.y_mm, s.dt_s, &[1.0]);
-        c8.add_bilinear(s.x_mm, s.y_mm, s.dt_s, &[s.u_mm; 8]);
+        c8.add(s.x_mm, s.y_mm, s.dt_s, &[s.u_mm; 8]);
     }
     eprintln!("stream + splat {:?}", t.elapsed());
     for _ in 0..2 {

@@ -7,9 +7,10 @@ pub enum VibrationError {
     /// A `[vibration]` key whose value is out of its domain or of the wrong type.
     #[error("[vibration] {key}: {what}")]
     InvalidParam { key: String, what: String },
-    /// A key the `[vibration]` table does not know (usually a typo).
-    #[error("[vibration] unknown key '{0}'")]
-    UnknownKey(String),
+    /// A `[vibration]` table that does not read: an unknown key (with the nearest valid name)
+    /// or a wrong type; the message names the key (bonnetlab_process::config).
+    #[error("{0}")]
+    Table(String),
     /// Two keys that cannot be given together.
     #[error("[vibration] '{0}' and '{1}' cannot both be given")]
     Conflict(String, String),

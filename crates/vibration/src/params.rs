@@ -44,7 +44,9 @@
 //! and θ, and ‖K_fd‖_F its Frobenius norm.
 
 use crate::error::VibrationError;
-use serde::Serialize;
+use bonnetlab_process::config::from_table;
+use bonnetlab_process::recipe::RecipeDoc;
+use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::fmt;
 use std::str::FromStr;
@@ -223,25 +225,55 @@ pub fn principal_axes(kfd: [[f64; 2]; 2]) -> Result<(f64, f64, f64, f64), Vibrat
     Ok((k1, k2, theta.to_degrees(), norm))
 }
 
+/// The `[vibration]` table as written: every key optional, unknown keys an error (read with
+/// bonnetlab_process::config, which names the nearest valid key). Defaults and domains: the
+/// table in the module doc.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VibrationTable {
+    pub k1_n_per_mm: Option<f64>,
+    pub k2_n_per_mm: Option<f64>,
+    pub theta_deg: Option<f64>,
+    pub kfd_n_per_mm: Option<[[f64; 2]; 2]>,
+    pub mass_kg: Option<f64>,
+    pub natural_freq_hz: Option<f64>,
+    pub zeta1: Option<f64>,
+    pub zeta2: Option<f64>,
+    pub fn_n: Option<f64>,
+    pub mu: Option<f64>,
+    pub loss_factor: Option<f64>,
+    pub spindle_rpm: Option<f64>,
+    pub damping_split: Option<String>,
+    pub harmonics: Option<Vec<f64>>,
+    pub noise_force_rms_n: Option<f64>,
+    pub noise_band_hz: Option<f64>,
+    pub accel_max_mm_per_s2: Option<f64>,
+    pub element_stiffness_n_per_mm: Option<f64>,
+    pub bonnet_radius_mm: Option<f64>,
+    pub offset_mm: Option<f64>,
+    pub inner_pressure_mpa: Option<f64>,
+    pub pressure_exponent: Option<f64>,
+    pub lateral_axis: Option<String>,
+}
+
 impl VibrationParams {
-    /// Reads a whole recipe document: `[vibration]` (optional), with `[process]` and `[tif]`
-    /// supplying spindle speed, offset, pressure and bonnet radius where `[vibration]` is silent.
-    pub fn from_recipe(doc: &toml::Table) -> Result<Self, VibrationError> {
-        let vib = table_of(doc, "vibration")?;
-        let process = table_of(doc, "process")?;
-        let tif_radius = doc
-            .get("tif")
-            .and_then(|t| t.as_table())
-            .and_then(|t| t.get("model"))
-            .and_then(|m| m.as_table())
-            .filter(|m| m.get("kind").and_then(|k| k.as_str()) == Some("bonnet"))
-            .and_then(|m| m.get("radius_mm"))
-            .and_then(number);
-        Self::from_tables(vib, process, tif_radius)
+    /// Reads a whole recipe document (typed, strict: bonnetlab_process::recipe::RecipeDoc):
+    /// `[vibration]` (optional), with `[process]` and the bonnet `[tif] model` supplying spindle
+    /// speed, offset, pressure and bonnet radius where `[vibration]` is silent.
+    pub fn from_recipe(doc: &RecipeDoc) -> Result<Self, VibrationError> {
+        let p = doc.process.clone().unwrap_or_default();
+        Self::from_parts(
+            doc.vibration.as_ref(),
+            p.spindle_rpm,
+            p.offset_mm,
+            p.inner_pressure_mpa,
+            doc.bonnet_radius_mm(),
+        )
     }
 
     /// For callers holding an already-parsed recipe (bonnetlab_process::Recipe): the raw
-    /// `[vibration]` table plus the `[process]` values and the bonnet TIF radius, each optional.
+    /// `[vibration]` table (read here into [`VibrationTable`], strictly) plus the `[process]`
+    /// values and the bonnet TIF radius, each optional.
     pub fn from_parts(
         vib: Option<&toml::Table>,
         spindle_rpm: Option<f64>,
@@ -249,55 +281,47 @@ impl VibrationParams {
         inner_pressure_mpa: Option<f64>,
         tif_radius_mm: Option<f64>,
     ) -> Result<Self, VibrationError> {
-        let mut process = toml::Table::new();
-        for (k, v) in [
-            ("spindle_rpm", spindle_rpm),
-            ("offset_mm", offset_mm),
-            ("inner_pressure_mpa", inner_pressure_mpa),
-        ] {
-            if let Some(v) = v {
-                process.insert(k.to_string(), toml::Value::Float(v));
-            }
-        }
-        Self::from_tables(vib, Some(&process), tif_radius_mm)
-    }
-
-    /// Reads the `[vibration]` table with fall-backs from `[process]` and the TIF model radius.
-    pub fn from_tables(
-        vib: Option<&toml::Table>,
-        process: Option<&toml::Table>,
-        tif_radius_mm: Option<f64>,
-    ) -> Result<Self, VibrationError> {
-        let empty = toml::Table::new();
-        let vib = vib.unwrap_or(&empty);
-        for key in vib.keys() {
-            if !KNOWN_KEYS.contains(&key.as_str()) {
-                return Err(VibrationError::UnknownKey(key.clone()));
-            }
-        }
-        let d = VibrationParams::default();
-        let get = |key: &str| -> Result<Option<f64>, VibrationError> {
-            match vib.get(key) {
-                None => Ok(None),
-                Some(v) => number(v).map(Some).ok_or_else(|| {
-                    VibrationError::param(key, format!("expected a number, found {v}"))
-                }),
+        let v: VibrationTable = match vib {
+            None => VibrationTable::default(),
+            Some(t) => {
+                from_table(t, "vibration").map_err(|e| VibrationError::Table(e.to_string()))?
             }
         };
-        let from_process = |key: &str| process.and_then(|p| p.get(key)).and_then(number);
+        Self::from_table(
+            &v,
+            spindle_rpm,
+            offset_mm,
+            inner_pressure_mpa,
+            tif_radius_mm,
+        )
+    }
 
-        let (k1, k2, theta, norm) = match vib.get("kfd_n_per_mm") {
-            Some(v) => {
-                for k in ["k1_n_per_mm", "k2_n_per_mm", "theta_deg"] {
-                    if vib.contains_key(k) {
+    /// The parameters from a typed `[vibration]` table with fall-backs from `[process]` and the
+    /// TIF model radius.
+    pub fn from_table(
+        v: &VibrationTable,
+        process_spindle_rpm: Option<f64>,
+        process_offset_mm: Option<f64>,
+        process_inner_pressure_mpa: Option<f64>,
+        tif_radius_mm: Option<f64>,
+    ) -> Result<Self, VibrationError> {
+        let d = VibrationParams::default();
+        let (k1, k2, theta, norm) = match v.kfd_n_per_mm {
+            Some(m) => {
+                for (k, given) in [
+                    ("k1_n_per_mm", v.k1_n_per_mm.is_some()),
+                    ("k2_n_per_mm", v.k2_n_per_mm.is_some()),
+                    ("theta_deg", v.theta_deg.is_some()),
+                ] {
+                    if given {
                         return Err(VibrationError::Conflict("kfd_n_per_mm".into(), k.into()));
                     }
                 }
-                principal_axes(matrix_2x2(v)?)?
+                principal_axes(m)?
             }
             None => {
-                let k1 = get("k1_n_per_mm")?.unwrap_or(d.k1_n_per_mm);
-                let k2 = get("k2_n_per_mm")?.unwrap_or(d.k2_n_per_mm);
+                let k1 = v.k1_n_per_mm.unwrap_or(d.k1_n_per_mm);
+                let k2 = v.k2_n_per_mm.unwrap_or(d.k2_n_per_mm);
                 positive("k1_n_per_mm", k1)?;
                 positive("k2_n_per_mm", k2)?;
                 if k2 > k1 {
@@ -306,12 +330,12 @@ impl VibrationParams {
                         "k2 is the softest principal stiffness: must not exceed k1",
                     ));
                 }
-                let theta = get("theta_deg")?.unwrap_or(d.theta_deg);
+                let theta = v.theta_deg.unwrap_or(d.theta_deg);
                 finite_in("theta_deg", theta, -90.0, 90.0)?;
                 (k1, k2, theta, (k1 * k1 + k2 * k2).sqrt())
             }
         };
-        let (mass_kg, mass_source) = match (get("mass_kg")?, get("natural_freq_hz")?) {
+        let (mass_kg, mass_source) = match (v.mass_kg, v.natural_freq_hz) {
             (Some(_), Some(_)) => {
                 return Err(VibrationError::Conflict(
                     "mass_kg".into(),
@@ -338,58 +362,53 @@ impl VibrationParams {
             kfd_frobenius_n_per_mm: norm,
             mass_kg,
             mass_source,
-            zeta1: get("zeta1")?.unwrap_or(d.zeta1),
-            zeta2: get("zeta2")?.unwrap_or(d.zeta2),
-            fn_n: get("fn_n")?.unwrap_or(d.fn_n),
-            mu: get("mu")?.unwrap_or(d.mu),
-            loss_factor: get("loss_factor")?.unwrap_or(d.loss_factor),
-            spindle_rpm: get("spindle_rpm")?
-                .or_else(|| from_process("spindle_rpm"))
+            zeta1: v.zeta1.unwrap_or(d.zeta1),
+            zeta2: v.zeta2.unwrap_or(d.zeta2),
+            fn_n: v.fn_n.unwrap_or(d.fn_n),
+            mu: v.mu.unwrap_or(d.mu),
+            loss_factor: v.loss_factor.unwrap_or(d.loss_factor),
+            spindle_rpm: v
+                .spindle_rpm
+                .or(process_spindle_rpm)
                 .unwrap_or(d.spindle_rpm),
-            damping_split: match vib.get("damping_split") {
+            damping_split: match v.damping_split.as_deref() {
                 None => d.damping_split,
-                Some(v) => match v.as_str() {
-                    Some("isotropic") => DampingSplit::Isotropic,
-                    Some("axial") => DampingSplit::Axial,
-                    _ => {
-                        return Err(VibrationError::param(
-                            "damping_split",
-                            format!("expected \"isotropic\" or \"axial\", found {v}"),
-                        ))
-                    }
-                },
+                Some("isotropic") => DampingSplit::Isotropic,
+                Some("axial") => DampingSplit::Axial,
+                Some(s) => {
+                    return Err(VibrationError::param(
+                        "damping_split",
+                        format!("expected \"isotropic\" or \"axial\", found \"{s}\""),
+                    ))
+                }
             },
-            harmonics: match vib.get("harmonics") {
-                None => d.harmonics.clone(),
-                Some(v) => number_list("harmonics", v)?,
-            },
-            noise_force_rms_n: get("noise_force_rms_n")?.unwrap_or(d.noise_force_rms_n),
-            noise_band_hz: get("noise_band_hz")?.unwrap_or(d.noise_band_hz),
-            accel_max_mm_per_s2: get("accel_max_mm_per_s2")?.unwrap_or(d.accel_max_mm_per_s2),
-            element_stiffness_n_per_mm: get("element_stiffness_n_per_mm")?
+            harmonics: v.harmonics.clone().unwrap_or_else(|| d.harmonics.clone()),
+            noise_force_rms_n: v.noise_force_rms_n.unwrap_or(d.noise_force_rms_n),
+            noise_band_hz: v.noise_band_hz.unwrap_or(d.noise_band_hz),
+            accel_max_mm_per_s2: v.accel_max_mm_per_s2.unwrap_or(d.accel_max_mm_per_s2),
+            element_stiffness_n_per_mm: v
+                .element_stiffness_n_per_mm
                 .unwrap_or(d.element_stiffness_n_per_mm),
-            bonnet_radius_mm: get("bonnet_radius_mm")?
+            bonnet_radius_mm: v
+                .bonnet_radius_mm
                 .or(tif_radius_mm)
                 .unwrap_or(d.bonnet_radius_mm),
-            offset_mm: get("offset_mm")?
-                .or_else(|| from_process("offset_mm"))
-                .unwrap_or(d.offset_mm),
-            inner_pressure_mpa: get("inner_pressure_mpa")?
-                .or_else(|| from_process("inner_pressure_mpa"))
+            offset_mm: v.offset_mm.or(process_offset_mm).unwrap_or(d.offset_mm),
+            inner_pressure_mpa: v
+                .inner_pressure_mpa
+                .or(process_inner_pressure_mpa)
                 .unwrap_or(d.inner_pressure_mpa),
-            pressure_exponent: get("pressure_exponent")?.unwrap_or(d.pressure_exponent),
-            lateral_axis: match vib.get("lateral_axis") {
+            pressure_exponent: v.pressure_exponent.unwrap_or(d.pressure_exponent),
+            lateral_axis: match v.lateral_axis.as_deref() {
                 None => d.lateral_axis,
-                Some(v) => match v.as_str() {
-                    Some("x") | Some("X") => LateralAxis::X,
-                    Some("y") | Some("Y") => LateralAxis::Y,
-                    _ => {
-                        return Err(VibrationError::param(
-                            "lateral_axis",
-                            format!("expected \"x\" or \"y\", found {v}"),
-                        ))
-                    }
-                },
+                Some("x") | Some("X") => LateralAxis::X,
+                Some("y") | Some("Y") => LateralAxis::Y,
+                Some(s) => {
+                    return Err(VibrationError::param(
+                        "lateral_axis",
+                        format!("expected \"x\" or \"y\", found \"{s}\""),
+                    ))
+                }
             },
         };
         p.validate()?;
@@ -539,85 +558,8 @@ impl VibrationParams {
     }
 }
 
-const KNOWN_KEYS: &[&str] = &[
-    "k1_n_per_mm",
-    "k2_n_per_mm",
-    "theta_deg",
-    "kfd_n_per_mm",
-    "mass_kg",
-    "natural_freq_hz",
-    "zeta1",
-    "zeta2",
-    "fn_n",
-    "mu",
-    "loss_factor",
-    "spindle_rpm",
-    "damping_split",
-    "harmonics",
-    "noise_force_rms_n",
-    "noise_band_hz",
-    "accel_max_mm_per_s2",
-    "element_stiffness_n_per_mm",
-    "bonnet_radius_mm",
-    "offset_mm",
-    "inner_pressure_mpa",
-    "pressure_exponent",
-    "lateral_axis",
-];
-
 pub(crate) fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
     a[0] * b[0] + a[1] * b[1]
-}
-
-fn number(v: &toml::Value) -> Option<f64> {
-    match v {
-        toml::Value::Float(f) => Some(*f),
-        toml::Value::Integer(i) => Some(*i as f64),
-        _ => None,
-    }
-}
-
-fn table_of<'a>(
-    doc: &'a toml::Table,
-    name: &str,
-) -> Result<Option<&'a toml::Table>, VibrationError> {
-    match doc.get(name) {
-        None => Ok(None),
-        Some(toml::Value::Table(t)) => Ok(Some(t)),
-        Some(_) => Err(VibrationError::InvalidArgument(format!(
-            "[{name}] must be a table"
-        ))),
-    }
-}
-
-fn number_list(key: &str, v: &toml::Value) -> Result<Vec<f64>, VibrationError> {
-    let arr = v
-        .as_array()
-        .ok_or_else(|| VibrationError::param(key, "expected an array of numbers"))?;
-    arr.iter()
-        .map(|x| {
-            number(x).ok_or_else(|| VibrationError::param(key, "expected an array of numbers"))
-        })
-        .collect()
-}
-
-fn matrix_2x2(v: &toml::Value) -> Result<[[f64; 2]; 2], VibrationError> {
-    let key = "kfd_n_per_mm";
-    let rows = v
-        .as_array()
-        .ok_or_else(|| VibrationError::param(key, "expected [[a, b], [c, d]]"))?;
-    if rows.len() != 2 {
-        return Err(VibrationError::param(key, "expected 2 rows"));
-    }
-    let mut m = [[0.0; 2]; 2];
-    for (i, row) in rows.iter().enumerate() {
-        let r = number_list(key, row)?;
-        if r.len() != 2 {
-            return Err(VibrationError::param(key, "expected 2 columns"));
-        }
-        m[i] = [r[0], r[1]];
-    }
-    Ok(m)
 }
 
 fn positive(key: &str, v: f64) -> Result<(), VibrationError> {
@@ -704,7 +646,8 @@ mod tests {
 
     #[test]
     fn table_parsing_defaults_conflicts_and_typos() {
-        let doc: toml::Table = toml::from_str(
+        let doc_of = |t: &str| RecipeDoc::parse(t, std::path::Path::new("r.toml"));
+        let doc = doc_of(
             "[process]\nspindle_rpm = 750\noffset_mm = 0.8\n[vibration]\nmass_kg = 50.0\nzeta1 = 0.03\n",
         )
         .unwrap();
@@ -715,7 +658,7 @@ mod tests {
         assert_eq!(p.zeta1, 0.03);
         assert_eq!(p.mass_source, MassSource::Given);
         let q = VibrationParams::from_parts(
-            doc.get("vibration").and_then(|v| v.as_table()),
+            doc.vibration.as_ref(),
             Some(750.0),
             Some(0.8),
             None,
@@ -726,28 +669,26 @@ mod tests {
             (q.spindle_rpm, q.offset_mm, q.bonnet_radius_mm, q.mass_kg),
             (750.0, 0.8, 25.0, 50.0)
         );
-        let bad: toml::Table = toml::from_str("[vibration]\nk1 = 3.0\n").unwrap();
+        let bad = doc_of("[vibration]\nk1 = 3.0\n").unwrap();
         assert_eq!(
-            VibrationParams::from_recipe(&bad).unwrap_err(),
-            VibrationError::UnknownKey("k1".into())
+            VibrationParams::from_recipe(&bad).unwrap_err().to_string(),
+            "[vibration] k1: unknown key; did you mean `k1_n_per_mm`?"
         );
-        let both: toml::Table =
-            toml::from_str("[vibration]\nmass_kg = 3.0\nnatural_freq_hz = 9.0\n").unwrap();
+        let both = doc_of("[vibration]\nmass_kg = 3.0\nnatural_freq_hz = 9.0\n").unwrap();
         assert!(matches!(
             VibrationParams::from_recipe(&both),
             Err(VibrationError::Conflict(..))
         ));
-        let neg: toml::Table = toml::from_str("[vibration]\nzeta2 = -0.1\n").unwrap();
+        let neg = doc_of("[vibration]\nzeta2 = -0.1\n").unwrap();
         let e = VibrationParams::from_recipe(&neg).unwrap_err().to_string();
         assert!(e.contains("zeta2"), "{e}");
-        let txt: toml::Table = toml::from_str("[vibration]\nmu = \"high\"\n").unwrap();
+        let txt = doc_of("[vibration]\nmu = \"high\"\n").unwrap();
         assert!(VibrationParams::from_recipe(&txt)
             .unwrap_err()
             .to_string()
             .contains("mu"));
-        let kfd: toml::Table =
-            toml::from_str("[vibration]\nkfd_n_per_mm = [[1000.0, 200.0], [200.0, 500.0]]\n")
-                .unwrap();
+        let kfd =
+            doc_of("[vibration]\nkfd_n_per_mm = [[1000.0, 200.0], [200.0, 500.0]]\n").unwrap();
         let p = VibrationParams::from_recipe(&kfd).unwrap();
         assert!(p.k1_n_per_mm > p.k2_n_per_mm);
         let m = 1e3 * (1000.0f64.powi(2) + 500.0f64.powi(2) + 2.0 * 200.0f64.powi(2)).sqrt()

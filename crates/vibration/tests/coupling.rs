@@ -2,20 +2,24 @@
 //! direct time-domain deposition of the instantaneous TIF, on a realistic raster run with
 //! vibration on (issue 6: agreement within 1 % of the predicted MSF band RMS).
 
-use bonnetlab_process::path::RasterSpec;
+use bonnetlab_process::path::{RasterSpec, ScanAxis};
+use bonnetlab_process::recipe::TifSource;
+use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::tif::GaussianTif;
 use bonnetlab_process::{Grid, PathLog};
 use bonnetlab_vibration::coupling::predict::msf_band_rms_y;
 use bonnetlab_vibration::coupling::{
-    direct_removal, fast_maps, predict, CouplingInput, CouplingOptions, Mechanisms,
+    direct_removal, direct_removal_with, fast_maps, predict, CouplingInput, CouplingOptions,
+    Mechanisms,
 };
-use bonnetlab_vibration::params::{Bonnet, VibrationParams};
+use bonnetlab_vibration::params::{Bonnet, LateralAxis, VibrationParams};
 use ndarray::Array2;
 
 struct Run {
     grid: Grid,
-    tif: GaussianTif,
+    tool: ToolModel,
     path: PathLog,
+    pitch_mm: f64,
 }
 
 /// A 24 x 24 mm part at 0.25 mm, Gaussian spot (σ 1 mm, 8 mm footprint), bidirectional
@@ -26,71 +30,203 @@ fn run() -> Run {
 
 /// As [`run`] with the last raster line at or below `y_last_mm`.
 fn run_lines(y_last_mm: f64) -> Run {
+    raster(3.0, ScanAxis::X, y_last_mm)
+}
+
+/// A raster of `pitch_mm` scanned along `axis` over the 24 x 24 mm part, lines from −3 mm up
+/// to `last_mm` across the scan.
+fn raster(pitch_mm: f64, axis: ScanAxis, last_mm: f64) -> Run {
     let grid = Grid::new(97, 97, 0.25, 0.25, 0.0, 0.0).unwrap();
     let tif = GaussianTif::new(1.0, 8.0, 10.0).unwrap();
-    let mut spec = RasterSpec::over_rect((0.0, 24.0), (-3.0, y_last_mm), 3.0, 1.6);
+    let tool = ToolModel::from_source(&TifSource::Gaussian(tif), None, 0.25, 0.25).unwrap();
+    let mut spec = RasterSpec::over_rect((0.0, 24.0), (-3.0, last_mm), pitch_mm, 1.6);
     spec.overtravel_mm = 4.0;
+    spec.axis = axis;
     let path = spec.generate().unwrap();
-    Run { grid, tif, path }
+    Run {
+        grid,
+        tool,
+        path,
+        pitch_mm,
+    }
+}
+
+fn input<'a>(r: &'a Run, params: &'a VibrationParams) -> CouplingInput<'a> {
+    CouplingInput {
+        grid: r.grid,
+        valid: None,
+        tool: &r.tool,
+        path: &r.path,
+        params,
+        pitch_mm: Some(r.pitch_mm),
+    }
 }
 
 fn band_diff(input: &CouplingInput<'_>, a: &Array2<f64>, b: &Array2<f64>) -> f64 {
     msf_band_rms_y(input, &(a - b), CouplingOptions::default().msf_band_per_mm).unwrap()
 }
 
+/// Fast coupling (process's fast removal + derivative-kernel expansion) against the direct
+/// deposition (exact time-domain deposition of the instantaneous TIF, 2 sub-steps per
+/// 500 Hz sample), every mechanism on, 24 x 24 mm at 0.25 mm, Gaussian σ 1 mm, lines from
+/// −3 to 15 mm. Criterion (issue 14): the MSF band RMS across the raster lines (one-sided PSD
+/// along Y for an X scan, along X for a Y scan; band 0.1 to 1 per mm) of the fast − direct
+/// difference map within 1 % of the direct removal's. The vibration-induced part (all on − all
+/// off) is checked against the same total, and its own band RMS within 5 %.
+///
+/// Measured (MSF band RMS across the lines, nm; diff = band RMS of the difference map):
+///
+/// | case | scan | pitch mm | rpm | vibration | fast | direct | diff | induced fast / direct / diff |
+/// |---|---|---|---|---|---|---|---|---|
+/// | a | X | 3.0 | 558 (x2 resonance) | default | 4.19589 | 4.19581 | 0.013 % | 0.00591 / 0.00605 / 0.00054 |
+/// | b | X | 1.7 | 1500 | default | 6.35715 | 6.35715 | 0.002 % | 0.00113 / 0.00114 / 0.00010 |
+/// | c | X | 3.0 | 558 | 1.5x force, 3x noise | 4.19577 | 4.19564 | 0.013 % | 0.01338 / 0.01361 / 0.00055 |
+/// | d | Y (lateral Y) | 3.0 | 558 | default | 4.19589 | 4.19581 | 0.013 % | 0.00591 / 0.00605 / 0.00054 |
+/// | e | Y (lateral Y) | 1.7 | 900 | 1.5x force, 3x noise | 6.35641 | 6.35641 | 0.003 % | 0.00337 / 0.00339 / 0.00018 |
+///
+/// (d is a transposed: the same numbers to every digit, so both scan axes run the same model.)
+///
+/// Most of the induced difference is the `normal_offset` ring-down after velocity changes,
+/// whose offset swings are large enough for the second-order expansion's remainder to show
+/// (about 9 % of that mechanism's own imprint, 1e-4 of the removal's MSF band RMS).
 #[test]
-fn fast_expansion_agrees_with_direct_deposition_within_1_percent() {
-    let r = run();
-    // Default parameters at the x2 resonance (558 rpm), every mechanism on.
-    let params = VibrationParams {
-        spindle_rpm: 558.0,
+fn fast_coupling_agrees_with_direct_deposition_within_1_percent_over_cases() {
+    struct Case {
+        name: &'static str,
+        axis: ScanAxis,
+        pitch: f64,
+        params: VibrationParams,
+    }
+    let strong = |rpm: f64, lateral: LateralAxis| VibrationParams {
+        spindle_rpm: rpm,
+        fn_n: 3.0,
+        noise_force_rms_n: 1.5,
+        lateral_axis: lateral,
         ..Default::default()
     };
-    let input = CouplingInput {
-        grid: r.grid,
-        valid: None,
-        base_tif: &r.tif,
-        path: &r.path,
-        params: &params,
-        pitch_mm: Some(3.0),
+    let plain = |rpm: f64, lateral: LateralAxis| VibrationParams {
+        spindle_rpm: rpm,
+        lateral_axis: lateral,
+        ..Default::default()
     };
+    let cases = [
+        Case {
+            name: "a: X scan, 3 mm, 558 rpm",
+            axis: ScanAxis::X,
+            pitch: 3.0,
+            params: plain(558.0, LateralAxis::X),
+        },
+        Case {
+            name: "b: X scan, 1.7 mm, 1500 rpm",
+            axis: ScanAxis::X,
+            pitch: 1.7,
+            params: plain(1500.0, LateralAxis::X),
+        },
+        Case {
+            name: "c: X scan, 3 mm, 558 rpm, strong",
+            axis: ScanAxis::X,
+            pitch: 3.0,
+            params: strong(558.0, LateralAxis::X),
+        },
+        Case {
+            name: "d: Y scan, 3 mm, 558 rpm",
+            axis: ScanAxis::Y,
+            pitch: 3.0,
+            params: plain(558.0, LateralAxis::Y),
+        },
+        Case {
+            name: "e: Y scan, 1.7 mm, 900 rpm, strong",
+            axis: ScanAxis::Y,
+            pitch: 1.7,
+            params: strong(900.0, LateralAxis::Y),
+        },
+    ];
+    let opts = CouplingOptions {
+        sample_hz: 500.0,
+        ..Default::default()
+    };
+    let none = CouplingOptions {
+        mechanisms: Mechanisms::NONE,
+        ..opts
+    };
+    let band = opts.msf_band_per_mm;
+    let mut failures = Vec::new();
+    for c in &cases {
+        let r = raster(c.pitch, c.axis, 15.0);
+        let input = input(&r, &c.params);
+        // Across the lines: a Y scan's maps are transposed (square pixels).
+        let across = |m: &Array2<f64>| match c.axis {
+            ScanAxis::X => m.clone(),
+            ScanAxis::Y => m.t().to_owned(),
+        };
+        let fast = fast_maps(&input, Bonnet::Original, &opts).unwrap();
+        let direct = across(&direct_removal(&input, Bonnet::Original, &opts).unwrap());
+        let direct0 = across(&direct_removal(&input, Bonnet::Original, &none).unwrap());
+        let total = across(&fast.total());
+        let induced_fast = across(&fast.induced());
+        let msf_fast = msf_band_rms_y(&input, &total, band).unwrap();
+        let msf_direct = msf_band_rms_y(&input, &direct, band).unwrap();
+        let diff = band_diff(&input, &total, &direct);
+        let induced_direct = &direct - &direct0;
+        let i_fast = msf_band_rms_y(&input, &induced_fast, band).unwrap();
+        let i_direct = msf_band_rms_y(&input, &induced_direct, band).unwrap();
+        let i_diff = band_diff(&input, &induced_fast, &induced_direct);
+        eprintln!(
+            "{}: MSF band RMS fast {msf_fast:.5} nm, direct {msf_direct:.5} nm, difference \
+             {diff:.6} nm ({:.3} %); induced fast {i_fast:.5} nm, direct {i_direct:.5} nm, \
+             difference {i_diff:.6} nm",
+            c.name,
+            100.0 * diff / msf_direct
+        );
+        if !(msf_direct > 0.0 && i_direct > 0.0) {
+            failures.push(format!("{}: no MSF structure", c.name));
+        }
+        if diff > 0.01 * msf_direct || (msf_fast - msf_direct).abs() > 0.01 * msf_direct {
+            failures.push(format!("{}: {diff} vs {msf_direct}", c.name));
+        }
+        // The vibration-induced part alone (all on minus all off) agrees too.
+        if i_diff > 0.01 * msf_direct || (i_fast - i_direct).abs() > 0.05 * i_direct {
+            failures.push(format!("{}: induced {i_fast} vs {i_direct}", c.name));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// The reference is converged: halving the direct deposition's sub-step (2 -> 4 per 500 Hz
+/// sample) changes its removal's MSF band RMS by less than 0.1 % (measured: 0.0 % on the
+/// X-scan 558 rpm run, the difference map's band RMS 1e-6 of the removal's), and the MSF band RMS
+/// of the induced part by less than 0.1 % of itself.
+#[test]
+fn direct_deposition_is_converged_in_its_sub_step() {
+    let r = raster(3.0, ScanAxis::X, 9.0);
+    let params = VibrationParams {
+        spindle_rpm: 558.0,
+        fn_n: 3.0,
+        noise_force_rms_n: 1.5,
+        ..Default::default()
+    };
+    let input = input(&r, &params);
     let opts = CouplingOptions {
         sample_hz: 500.0,
         ..Default::default()
     };
     let band = opts.msf_band_per_mm;
-    let fast = fast_maps(&input, Bonnet::Original, &opts).unwrap();
-    let direct = direct_removal(&input, Bonnet::Original, &opts).unwrap();
-    let total = fast.total();
-    let msf_fast = msf_band_rms_y(&input, &total, band).unwrap();
-    let msf_direct = msf_band_rms_y(&input, &direct, band).unwrap();
-    let diff = band_diff(&input, &total, &direct);
-    eprintln!("MSF band RMS fast {msf_fast:.5} nm, direct {msf_direct:.5} nm, difference map {diff:.5} nm");
-    assert!(
-        msf_direct > 1.0,
-        "the run must produce MSF removal structure: {msf_direct}"
-    );
-    assert!((msf_fast - msf_direct).abs() <= 0.01 * msf_direct);
-    assert!(
-        diff <= 0.01 * msf_direct,
-        "difference map band RMS {diff} vs {msf_direct}"
-    );
-
-    // The vibration-induced part alone (all on minus all off) agrees too.
     let none = CouplingOptions {
         mechanisms: Mechanisms::NONE,
         ..opts
     };
-    let direct0 = direct_removal(&input, Bonnet::Original, &none).unwrap();
-    let induced_direct = &direct - &direct0;
-    let induced_fast = fast.induced();
-    let i_fast = msf_band_rms_y(&input, &induced_fast, band).unwrap();
-    let i_direct = msf_band_rms_y(&input, &induced_direct, band).unwrap();
-    let i_diff = band_diff(&input, &induced_fast, &induced_direct);
-    eprintln!("induced MSF band RMS fast {i_fast:.5} nm, direct {i_direct:.5} nm, difference {i_diff:.5} nm");
-    assert!(i_direct > 0.0);
-    assert!(i_diff <= 0.01 * msf_direct);
-    assert!((i_fast - i_direct).abs() <= 0.05 * i_direct + 0.001 * msf_direct);
+    let d2 = direct_removal_with(&input, Bonnet::Original, &opts, 2).unwrap();
+    let d4 = direct_removal_with(&input, Bonnet::Original, &opts, 4).unwrap();
+    let b0 = direct_removal_with(&input, Bonnet::Original, &none, 4).unwrap();
+    let total = msf_band_rms_y(&input, &d4, band).unwrap();
+    let change = band_diff(&input, &d2, &d4);
+    let induced = msf_band_rms_y(&input, &(&d4 - &b0), band).unwrap();
+    eprintln!(
+        "direct 2 vs 4 sub-steps: MSF band RMS {total:.5} nm, change {change:.3e} nm; induced \
+         {induced:.5} nm"
+    );
+    assert!(total > 1.0 && induced > 0.0);
+    assert!(change < 1e-3 * induced, "{change} vs induced {induced}");
 }
 
 #[test]
@@ -111,7 +247,7 @@ fn each_vibration_mechanism_matches_direct_deposition_when_exaggerated() {
     let input = CouplingInput {
         grid: r.grid,
         valid: None,
-        base_tif: &r.tif,
+        tool: &r.tool,
         path: &r.path,
         params: &params,
         pitch_mm: Some(3.0),
@@ -160,7 +296,7 @@ fn suppression_bonnet_predicts_less_vibration_induced_msf_at_resonance() {
     let input = CouplingInput {
         grid: r.grid,
         valid: None,
-        base_tif: &r.tif,
+        tool: &r.tool,
         path: &r.path,
         params: &params,
         pitch_mm: Some(3.0),
@@ -208,7 +344,7 @@ fn spindle_sweep_shows_the_resonance() {
     let input = CouplingInput {
         grid: r.grid,
         valid: None,
-        base_tif: &r.tif,
+        tool: &r.tool,
         path: &r.path,
         params: &params,
         pitch_mm: Some(3.0),

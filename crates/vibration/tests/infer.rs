@@ -4,6 +4,8 @@
 //! measurement noise on both maps; the inference uses the fast expansion with its own noise seed.
 
 use bonnetlab_process::path::RasterSpec;
+use bonnetlab_process::recipe::TifSource;
+use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::tif::GaussianTif;
 use bonnetlab_process::{Grid, PathLog};
 use bonnetlab_surface::rng::Rng;
@@ -24,6 +26,11 @@ const D: f64 = 0.25;
 const PITCH: f64 = 3.0;
 const RPM: f64 = 558.0;
 const FEED: f64 = 30.0;
+
+/// The run's tool (process's TIF front end) from a Gaussian TIF, at the map pixel.
+fn tool_of(t: GaussianTif) -> ToolModel {
+    ToolModel::from_source(&TifSource::Gaussian(t), None, D, D).unwrap()
+}
 
 fn grid() -> Grid {
     Grid::new(N, N, D, D, 0.0, 0.0).unwrap()
@@ -128,18 +135,20 @@ struct Fitted {
 fn run(truth: &VibrationParams, bonnet: Bonnet, t: &GaussianTif, t_model: &GaussianTif) -> Fitted {
     let g = grid();
     let p = path();
+    let tool_1 = tool_of(*t);
     let input = CouplingInput {
         grid: g,
         valid: None,
-        base_tif: t,
+        tool: &tool_1,
         path: &p,
         params: truth,
         pitch_mm: Some(PITCH),
     };
     let direct = direct_removal(&input, bonnet, &opts(11)).unwrap();
     let m = measure(&direct, 1000 + (truth.fn_n * 10.0) as u64, 1.0);
+    let tool_2 = tool_of(*t_model);
     let minput = CouplingInput {
-        base_tif: t_model,
+        tool: &tool_2,
         ..input
     };
     let model = ForcingModel::build(&minput, bonnet, &opts(2)).unwrap();
@@ -286,11 +295,12 @@ fn wider_spot_pair_gives_vibration_less_than_10_percent() {
 
     let p = path();
     let prm = params(5.0, ZETA);
+    let tool_3 = tool_of(t);
     let nominal = ForcingModel::build(
         &CouplingInput {
             grid: grid(),
             valid: None,
-            base_tif: &t,
+            tool: &tool_3,
             path: &p,
             params: &prm,
             pitch_mm: Some(PITCH),
@@ -354,10 +364,11 @@ fn forcing_polynomial_reproduces_the_coupling_at_any_forcing() {
         noise_force_rms_n: 0.8,
         ..params(3.7, ZETA)
     };
+    let tool_4 = tool_of(t);
     let input = CouplingInput {
         grid: grid(),
         valid: None,
-        base_tif: &t,
+        tool: &tool_4,
         path: &p,
         params: &prm,
         pitch_mm: Some(PITCH),
@@ -414,10 +425,11 @@ fn paper_feed_cannot_constrain_the_spindle_forcing() {
         spindle_rpm: 1000.0,
         ..params(5.0, ZETA)
     };
+    let tool_5 = tool_of(t);
     let input = CouplingInput {
         grid: grid(),
         valid: None,
-        base_tif: &t,
+        tool: &tool_5,
         path: &p,
         params: &prm,
         pitch_mm: Some(PITCH),
@@ -447,10 +459,11 @@ fn mismatched_map_is_an_error() {
     let t = tif(1.0);
     let p = path();
     let prm = params(1.0, ZETA);
+    let tool_6 = tool_of(t);
     let input = CouplingInput {
         grid: grid(),
         valid: None,
-        base_tif: &t,
+        tool: &tool_6,
         path: &p,
         params: &prm,
         pitch_mm: Some(PITCH),

@@ -3,8 +3,9 @@
 //! to the case file; the map is read by the caller (`bonnetlab_io`), so this crate stays free of
 //! file formats.
 //!
-//! Unknown keys are rejected (a typo must never be silently ignored), naming the key and the
-//! nearest valid key by edit distance; `[reference]` is free-form. An optional `[machine]` table
+//! Read with serde into typed tables through [`crate::config`]: unknown tables and keys are
+//! rejected (a typo must never be silently ignored), naming the key and the nearest valid key;
+//! a wrong type says what was expected; `[reference]` is free-form. An optional `[machine]` table
 //! gives the speed and acceleration limits of the feed realisation ([`Limits`]; defaults:
 //! `Limits::default()`).
 
@@ -12,6 +13,7 @@ use std::path::{Path, PathBuf};
 
 use bonnetlab_surface::Surface;
 use ndarray::{s, Array2};
+use serde::Deserialize;
 use toml::{Table, Value};
 
 use super::DwellProblem;
@@ -36,100 +38,47 @@ pub struct DwellCase {
     pub limits: Limits,
 }
 
-/// Keys each table may hold (`None`: the top level); `[reference]` is free-form.
-const SCHEMA: [(&str, &[&str]); 4] = [
-    (
-        "",
-        &[
-            "surface",
-            "pixel_mm",
-            "tif",
-            "clear_aperture",
-            "reference",
-            "machine",
-        ],
-    ),
-    (
-        "tif",
-        &["kind", "sigma_mm", "diameter_mm", "peak_rate_nm_per_s"],
-    ),
-    ("clear_aperture", &["rows", "cols", "x_mm", "y_mm"]),
-    (
-        "machine",
-        &[
-            "v_min_mm_per_s",
-            "v_max_mm_per_s",
-            "a_max_mm_per_s2",
-            "stop_angle_deg",
-        ],
-    ),
-];
-
-/// Levenshtein distance (for the nearest valid key).
-fn edit_distance(a: &str, b: &str) -> usize {
-    let b: Vec<char> = b.chars().collect();
-    let mut prev: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.chars().enumerate() {
-        let mut cur = vec![i + 1; b.len() + 1];
-        for (j, cb) in b.iter().enumerate() {
-            cur[j + 1] = (prev[j] + usize::from(ca != *cb))
-                .min(prev[j + 1] + 1)
-                .min(cur[j] + 1);
-        }
-        prev = cur;
-    }
-    prev[b.len()]
+/// The case file as written: typed and strict (an unknown table or key is an error naming the
+/// nearest valid name, [`crate::config`]); `[reference]` is free-form.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CaseDoc {
+    surface: Option<String>,
+    pixel_mm: Option<f64>,
+    tif: Option<CaseTif>,
+    clear_aperture: Option<CaseAperture>,
+    reference: Option<Table>,
+    machine: Option<CaseMachine>,
 }
 
-/// Edit distance to a valid key, or to its prefix of the same length plus one (so a
-/// shortened key such as `a_max` finds `a_max_mm_per_s2`).
-fn key_distance(key: &str, valid: &str) -> usize {
-    let n = key.chars().count();
-    let prefix: String = valid.chars().take(n).collect();
-    let p = if prefix.len() < valid.len() {
-        edit_distance(key, &prefix) + 1
-    } else {
-        usize::MAX
-    };
-    edit_distance(key, valid).min(p)
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CaseTif {
+    kind: Option<String>,
+    sigma_mm: Option<f64>,
+    diameter_mm: Option<f64>,
+    peak_rate_nm_per_s: Option<f64>,
 }
 
-/// The first unknown key of `root` (table path, key, nearest valid key).
-fn unknown_key(root: &Table) -> Option<(String, String, &'static str)> {
-    for (table, keys) in SCHEMA {
-        let t = if table.is_empty() {
-            root
-        } else {
-            match root.get(table).and_then(Value::as_table) {
-                Some(t) => t,
-                None => continue,
-            }
-        };
-        for k in t.keys() {
-            if !keys.contains(&k.as_str()) {
-                let near = keys
-                    .iter()
-                    .min_by_key(|c| key_distance(k, c))
-                    .copied()
-                    .unwrap_or("");
-                let path = if table.is_empty() {
-                    k.clone()
-                } else {
-                    format!("[{table}] {k}")
-                };
-                return Some((path, k.clone(), near));
-            }
-        }
-    }
-    None
+/// `rows` / `cols` are the clear aperture; `x_mm` / `y_mm` (informative) the same in mm.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CaseAperture {
+    rows: Option<[i64; 2]>,
+    cols: Option<[i64; 2]>,
+    #[allow(dead_code)]
+    x_mm: Option<[f64; 2]>,
+    #[allow(dead_code)]
+    y_mm: Option<[f64; 2]>,
 }
 
-/// Line and column (1-based) of byte offset `at` in `text`.
-fn line_col(text: &str, at: usize) -> (usize, usize) {
-    let before = &text[..at.min(text.len())];
-    let line = before.matches('\n').count() + 1;
-    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
-    (line, col)
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CaseMachine {
+    v_min_mm_per_s: Option<f64>,
+    v_max_mm_per_s: Option<f64>,
+    a_max_mm_per_s2: Option<f64>,
+    stop_angle_deg: Option<f64>,
 }
 
 /// A case's problem and where its dwell grid sits in the map.
@@ -160,55 +109,33 @@ impl DwellCase {
             key: key.to_string(),
             what,
         };
-        let root: Table = text.parse().map_err(|e: toml::de::Error| {
-            let at = e
-                .span()
-                .map(|r| {
-                    let (l, c) = line_col(text, r.start);
-                    format!("line {l} column {c}: ")
-                })
-                .unwrap_or_default();
-            err("TOML syntax", format!("{at}{}", e.message().trim()))
-        })?;
-        if let Some((path, key, near)) = unknown_key(&root) {
-            return Err(err(
-                &path,
-                format!("unknown key `{key}` (did you mean `{near}`?)"),
-            ));
-        }
-        let num = |t: &Table, key: &str, name: &str| -> Result<f64, ProcessError> {
-            match t.get(key) {
-                Some(Value::Float(f)) if f.is_finite() && *f > 0.0 => Ok(*f),
-                Some(Value::Integer(i)) if *i > 0 => Ok(*i as f64),
+        let doc: CaseDoc = crate::config::from_toml(text).map_err(|e| err(&e.key, e.what))?;
+        let num = |v: Option<f64>, name: &str| -> Result<f64, ProcessError> {
+            match v {
+                Some(f) if f.is_finite() && f > 0.0 => Ok(f),
                 Some(_) => Err(err(name, "must be a positive number".into())),
                 None => Err(err(name, "missing".into())),
             }
         };
-        let range = |t: &Table, key: &str, name: &str| -> Result<(usize, usize), ProcessError> {
-            let bad = || {
-                err(
+        let range = |v: Option<[i64; 2]>, name: &str| -> Result<(usize, usize), ProcessError> {
+            match v {
+                Some([x, y]) if x >= 0 && y > x => Ok((x as usize, y as usize)),
+                _ => Err(err(
                     name,
                     "must be [start, end) with 0 <= start < end integers".into(),
-                )
-            };
-            let a = t.get(key).and_then(Value::as_array).ok_or_else(bad)?;
-            match a.as_slice() {
-                [Value::Integer(x), Value::Integer(y)] if *x >= 0 && y > x => {
-                    Ok((*x as usize, *y as usize))
-                }
-                _ => Err(bad()),
+                )),
             }
         };
-        let surface = match root.get("surface") {
-            Some(Value::String(s)) => path.parent().unwrap_or(Path::new("")).join(s),
-            _ => return Err(err("surface", "missing or not a string".into())),
+        let surface = match &doc.surface {
+            Some(s) => path.parent().unwrap_or(Path::new("")).join(s),
+            None => return Err(err("surface", "missing".into())),
         };
-        let pixel_mm = num(&root, "pixel_mm", "pixel_mm")?;
-        let tif_t = root
-            .get("tif")
-            .and_then(Value::as_table)
+        let pixel_mm = num(doc.pixel_mm, "pixel_mm")?;
+        let tif_t = doc
+            .tif
+            .as_ref()
             .ok_or_else(|| err("[tif]", "missing table".into()))?;
-        match tif_t.get("kind").and_then(Value::as_str) {
+        match tif_t.kind.as_deref() {
             Some("gaussian") => {}
             other => {
                 return Err(err(
@@ -218,24 +145,24 @@ impl DwellCase {
             }
         }
         let tif = GaussianTif::new(
-            num(tif_t, "sigma_mm", "[tif] sigma_mm")?,
-            num(tif_t, "diameter_mm", "[tif] diameter_mm")?,
-            num(tif_t, "peak_rate_nm_per_s", "[tif] peak_rate_nm_per_s")?,
+            num(tif_t.sigma_mm, "[tif] sigma_mm")?,
+            num(tif_t.diameter_mm, "[tif] diameter_mm")?,
+            num(tif_t.peak_rate_nm_per_s, "[tif] peak_rate_nm_per_s")?,
         )
         .map_err(|e| err("[tif]", e.to_string()))?;
-        let ca = root
-            .get("clear_aperture")
-            .and_then(Value::as_table)
+        let ca = doc
+            .clear_aperture
+            .as_ref()
             .ok_or_else(|| err("[clear_aperture]", "missing table".into()))?;
         Ok(DwellCase {
             file: path.to_path_buf(),
             surface,
             pixel_mm,
             tif,
-            ca_rows: range(ca, "rows", "[clear_aperture] rows")?,
-            ca_cols: range(ca, "cols", "[clear_aperture] cols")?,
-            reference: root.get("reference").and_then(Value::as_table).cloned(),
-            limits: machine_limits(&root, &err)?,
+            ca_rows: range(ca.rows, "[clear_aperture] rows")?,
+            ca_cols: range(ca.cols, "[clear_aperture] cols")?,
+            limits: machine_limits(doc.machine.as_ref(), &err)?,
+            reference: doc.reference,
         })
     }
 
@@ -312,26 +239,22 @@ impl DwellCase {
 
 /// The `[machine]` limits (defaults for absent keys), checked.
 fn machine_limits(
-    root: &Table,
+    m: Option<&CaseMachine>,
     err: &dyn Fn(&str, String) -> ProcessError,
 ) -> Result<Limits, ProcessError> {
     let mut l = Limits::default();
-    let Some(v) = root.get("machine") else {
+    let Some(m) = m else {
         return Ok(l);
     };
-    let t = v
-        .as_table()
-        .ok_or_else(|| err("[machine]", "must be a table".into()))?;
-    for (key, slot) in [
-        ("v_min_mm_per_s", &mut l.v_min_mm_per_s),
-        ("v_max_mm_per_s", &mut l.v_max_mm_per_s),
-        ("a_max_mm_per_s2", &mut l.a_max_mm_per_s2),
-        ("stop_angle_deg", &mut l.stop_angle_deg),
+    for (key, v, slot) in [
+        ("v_min_mm_per_s", m.v_min_mm_per_s, &mut l.v_min_mm_per_s),
+        ("v_max_mm_per_s", m.v_max_mm_per_s, &mut l.v_max_mm_per_s),
+        ("a_max_mm_per_s2", m.a_max_mm_per_s2, &mut l.a_max_mm_per_s2),
+        ("stop_angle_deg", m.stop_angle_deg, &mut l.stop_angle_deg),
     ] {
-        match t.get(key) {
+        match v {
             None => {}
-            Some(Value::Float(f)) if f.is_finite() && *f > 0.0 => *slot = *f,
-            Some(Value::Integer(i)) if *i > 0 => *slot = *i as f64,
+            Some(f) if f.is_finite() && f > 0.0 => *slot = f,
             Some(_) => {
                 return Err(err(
                     &format!("[machine] {key}"),
@@ -382,14 +305,15 @@ mod tests {
         assert!(e.contains("pixle_mm") && e.contains("`pixel_mm`"), "{e}");
         let c = parse(&format!("{GOOD}[machine]\nv_max_mm_per_s = 20\n")).unwrap();
         assert_eq!(c.limits.v_max_mm_per_s, 20.0);
-        assert_eq!(edit_distance("kitten", "sitting"), 3);
     }
 
     #[test]
     fn syntax_errors_carry_the_cause_and_place() {
         let e = parse("surface = \"s.dat\nbad").unwrap_err().to_string();
         assert!(
-            e.starts_with("case.toml: TOML syntax: line 2 column 4: ") && e.contains("expected"),
+            e.starts_with("case.toml: TOML: syntax error: ")
+                && e.ends_with("at line 2, column 4")
+                && e.contains("expected"),
             "{e}"
         );
         assert!(!e.contains('\n'));

@@ -1,28 +1,53 @@
-//! The reference: direct time-domain deposition of the instantaneous TIF, T(q − u e_l; δ),
-//! evaluated at every pixel for every coupling sample (no expansion, no splat), in parallel.
-//! Costly (pixels in the footprint x samples): for validation runs, not for production.
+//! The reference: exact time-domain deposition of the instantaneous TIF T(q − u e_l; δ)
+//! (process's [`bonnetlab_process::perturb::deposit_perturbed`]) at every pixel of the
+//! footprint, with no expansion, no splat and no kernel: it shares nothing with the fast path
+//! but the vibration time series and the TIF model.
+//!
+//! Sub-steps: every coupling sample (the vibration generated at `sample_hz`) is split into
+//! `substeps` sub-steps; position and displacements between samples are the piecewise-linear
+//! interpolant through the samples (held constant before the first and after the last), so
+//! the deposition converges as `substeps` grows (halving the step is a test). Costly (pixels in
+//! the footprint x sub-steps): for validation runs, not for production.
 
-use super::fast::executed_path;
-use super::instant::InstantTif;
+use super::fast::{axis, executed_path, offset_tif};
 use super::stream::{CouplingSample, SampleStream};
 use super::{CouplingInput, CouplingOptions};
 use crate::error::VibrationError;
-use crate::params::{Bonnet, LateralAxis};
+use crate::params::Bonnet;
+use bonnetlab_process::perturb::{deposit_perturbed, PerturbedSample};
 use ndarray::Array2;
-use rayon::prelude::*;
+
+/// Default sub-steps per coupling sample.
+pub const DEFAULT_SUBSTEPS: usize = 2;
 
 /// Removal (nm) on the map grid with the mechanisms of `opts` switched on (executed path when
-/// `dwell_execution` is on).
+/// `dwell_execution` is on), [`DEFAULT_SUBSTEPS`] sub-steps per sample.
 pub fn direct_removal(
     input: &CouplingInput<'_>,
     bonnet: Bonnet,
     opts: &CouplingOptions,
 ) -> Result<Array2<f64>, VibrationError> {
+    direct_removal_with(input, bonnet, opts, DEFAULT_SUBSTEPS)
+}
+
+/// [`direct_removal`] with `substeps` sub-steps per coupling sample (at least 1).
+pub fn direct_removal_with(
+    input: &CouplingInput<'_>,
+    bonnet: Bonnet,
+    opts: &CouplingOptions,
+    substeps: usize,
+) -> Result<Array2<f64>, VibrationError> {
+    if substeps == 0 {
+        return Err(VibrationError::InvalidArgument(
+            "direct deposition needs at least one sub-step per sample".into(),
+        ));
+    }
     let p = input.params;
     let g = input.grid;
-    let inst = InstantTif::new(input.base_tif, p);
+    let inst = offset_tif(input.tool.field(), p);
+    let lateral = axis(p.lateral_axis);
     let exec = executed_path(input, &opts.mechanisms)?;
-    let stream = SampleStream::new(
+    let mut stream = SampleStream::new(
         &exec,
         p,
         bonnet,
@@ -30,56 +55,49 @@ pub fn direct_removal(
         opts.sample_hz,
         opts.seed,
     )?;
-    let (ex, ey) = inst.half_extent_mm(0.2 * p.offset_mm);
-    let lat = p.lateral_axis;
-    let threads = rayon::current_num_threads().max(1);
-    let mut accs: Vec<Array2<f64>> = (0..threads)
-        .map(|_| Array2::zeros((g.rows, g.cols)))
-        .collect();
-    let mut buf: Vec<CouplingSample> = Vec::with_capacity(1 << 15);
-    let flush = |buf: &mut Vec<CouplingSample>, accs: &mut Vec<Array2<f64>>| {
-        let chunk = buf.len().div_ceil(threads).max(1);
-        accs.par_iter_mut()
-            .zip(buf.par_chunks(chunk))
-            .for_each(|(acc, part)| {
-                for s in part {
-                    let (cx, cy) = match lat {
-                        LateralAxis::X => (s.x_mm + s.u_mm, s.y_mm),
-                        LateralAxis::Y => (s.x_mm, s.y_mm + s.u_mm),
-                    };
-                    let d = s.delta_det_mm + s.delta_noise_mm;
-                    let j0 = ((cx - ex - g.x0_mm) / g.dx_mm).ceil().max(0.0) as usize;
-                    let j1 = ((cx + ex - g.x0_mm) / g.dx_mm)
-                        .floor()
-                        .min(g.cols as f64 - 1.0);
-                    let i0 = ((cy - ey - g.y0_mm) / g.dy_mm).ceil().max(0.0) as usize;
-                    let i1 = ((cy + ey - g.y0_mm) / g.dy_mm)
-                        .floor()
-                        .min(g.rows as f64 - 1.0);
-                    if j1 < 0.0 || i1 < 0.0 {
-                        continue;
-                    }
-                    for i in i0..=i1 as usize {
-                        let oy = g.y_mm(i) - cy;
-                        let mut row = acc.row_mut(i);
-                        for j in j0..=j1 as usize {
-                            row[j] += s.dt_s * inst.rate(g.x_mm(j) - cx, oy, d);
-                        }
-                    }
-                }
-            });
+    let mut out = Array2::zeros((g.rows, g.cols));
+    let mut buf: Vec<PerturbedSample> = Vec::with_capacity(1 << 16);
+    let flush = |buf: &mut Vec<PerturbedSample>, out: &mut Array2<f64>| {
+        let dmax = buf.iter().fold(0.0f64, |m, s| m.max(s.delta_mm.abs()));
+        deposit_perturbed(out, &g, &inst, lateral, dmax, buf);
         buf.clear();
     };
-    for s in stream {
-        buf.push(s);
-        if buf.len() == buf.capacity() {
-            flush(&mut buf, &mut accs);
+    let m = substeps as f64;
+    let lerp = |a: &CouplingSample, b: &CouplingSample, f: f64, dt: f64| PerturbedSample {
+        x_mm: a.x_mm + f * (b.x_mm - a.x_mm),
+        y_mm: a.y_mm + f * (b.y_mm - a.y_mm),
+        dt_s: dt,
+        u_mm: a.u_mm + f * (b.u_mm - a.u_mm),
+        delta_mm: (a.delta_det_mm + a.delta_noise_mm)
+            + f * ((b.delta_det_mm + b.delta_noise_mm) - (a.delta_det_mm + a.delta_noise_mm)),
+    };
+    let mut prev: Option<CouplingSample> = None;
+    let mut cur = stream.next();
+    while let Some(c) = cur {
+        let next = stream.next();
+        let dt = c.dt_s / m;
+        for k in 0..substeps {
+            // Offset of the sub-step from the sample's time, in sample intervals (−½..½).
+            let tau = (k as f64 + 0.5) / m - 0.5;
+            let s = if tau < 0.0 {
+                match &prev {
+                    Some(a) => lerp(&c, a, -tau, dt),
+                    None => lerp(&c, &c, 0.0, dt),
+                }
+            } else {
+                match &next {
+                    Some(b) => lerp(&c, b, tau, dt),
+                    None => lerp(&c, &c, 0.0, dt),
+                }
+            };
+            buf.push(s);
         }
+        if buf.len() >= (1 << 16) - substeps {
+            flush(&mut buf, &mut out);
+        }
+        prev = Some(c);
+        cur = next;
     }
-    flush(&mut buf, &mut accs);
-    let mut out = Array2::zeros((g.rows, g.cols));
-    for a in accs {
-        out += &a;
-    }
+    flush(&mut buf, &mut out);
     Ok(out)
 }

@@ -14,25 +14,25 @@
 //!
 //! Cross terms between mechanisms are kept in `interaction`.
 //!
-//! [`fast`] evaluates a second-order expansion with FFT convolutions of weighted dwell maps;
-//! [`direct`] deposits the instantaneous TIF sample by sample (the reference). [`predict`] turns
+//! [`fast`] takes the unperturbed removal from the process crate's fast removal model and the
+//! vibration's part from a second-order expansion (FFT convolutions of weighted dwell maps with
+//! derivative kernels, [`bonnetlab_process::perturb`]); [`direct`] deposits the instantaneous
+//! TIF sub-step by sub-step (the reference, independent of the expansion). [`predict`] turns
 //! the maps into the numbers `simulate` reports (MSF band RMS along Y per mechanism, shares,
 //! Y ripple σ1) and runs the spindle-speed sweep.
 
 pub mod direct;
 pub mod fast;
-pub mod instant;
 pub mod predict;
-pub mod splat;
 pub mod stream;
 
 use crate::params::VibrationParams;
-use bonnetlab_process::tif::RateField;
+use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::{Grid, PathLog};
 use ndarray::Array2;
 use serde::Serialize;
 
-pub use direct::direct_removal;
+pub use direct::{direct_removal, direct_removal_with};
 pub use fast::fast_maps;
 pub use predict::{
     predict, predict_both, spindle_sweep, BonnetPrediction, MechanismResult, SweepRow,
@@ -97,8 +97,9 @@ pub struct CouplingInput<'a> {
     pub grid: Grid,
     /// Valid pixels of the map for the statistics (all valid when `None`).
     pub valid: Option<&'a Array2<bool>>,
-    /// The TIF at the nominal offset (a sampled `Tif` or an analytic model).
-    pub base_tif: &'a dyn RateField,
+    /// The tool at the nominal offset (process's TIF front end: its fast removal model and its
+    /// continuous field).
+    pub tool: &'a ToolModel,
     /// Commanded tool-centre path.
     pub path: &'a PathLog,
     pub params: &'a VibrationParams,

@@ -1,0 +1,178 @@
+//! Every configuration file (run recipe, dwell case, spot manifest, `[vibration]` table) is read
+//! strictly through the CLI: an unknown key, a misspelt table, a wrong type and a TOML syntax
+//! error each exit with code 2 and one line on stderr naming the file, the key with its table
+//! and the nearest valid name (or what was expected, or the parser's cause with line/column).
+
+use std::path::Path;
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
+}
+
+const RECIPE: &str = "[measurement]\nbefore = \"before.dat\"\n\n[tif]\nmodel = { kind = \"gaussian\", sigma_mm = 1.0, peak_rate_nm_per_s = 10.0 }\n\n[path]\nlog = \"path.csv\"\npitch_mm = 3.0\n\n[process]\nspindle_rpm = 1000.0\n";
+
+const CASE: &str = "surface = \"s.dat\"\npixel_mm = 0.5\n[tif]\nkind = \"gaussian\"\nsigma_mm = 1.0\ndiameter_mm = 6.0\npeak_rate_nm_per_s = 1.0\n[clear_aperture]\nrows = [10, 20]\ncols = [10, 30]\n";
+
+const MANIFEST: &str = "[defaults]\ndwell_s = 120.0\nprecession_deg = 20.0\noffset_mm = 0.8\nspindle_rpm = 500.0\ninner_pressure_mpa = 0.25\n\n[[spot]]\nfile = \"a.dat\"\nbonnet = \"original\"\n";
+
+const VIBRATION: &str = "[process]\nspindle_rpm = 1000.0\n\n[vibration]\nfn_n = 3.0\nmu = 0.3\n";
+
+/// Runs `args` with the config file (written as `name`) and returns (exit code, stderr).
+fn run(dir: &Path, name: &str, text: &str, args: &[&str]) -> (Option<i32>, String) {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    let out = dir.join("out");
+    let mut cmd = bin();
+    for a in args {
+        match *a {
+            "FILE" => cmd.arg(&p),
+            "OUT" => cmd.arg(&out),
+            a => cmd.arg(a),
+        };
+    }
+    let o = cmd.output().unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// (file text, what stderr must contain).
+type Case = (String, Vec<&'static str>);
+
+fn check(kind: &str, name: &str, args: &[&str], good: &str, cases: Vec<Case>) {
+    let dir = tempfile::tempdir().unwrap();
+    for (text, needles) in cases {
+        assert_ne!(text, good, "{kind}: the case must change the file");
+        let (code, err) = run(dir.path(), name, &text, args);
+        assert_eq!(code, Some(2), "{kind}: {err}");
+        let line = err.trim_end();
+        assert_eq!(line.lines().count(), 1, "{kind}: one line: {err}");
+        assert!(line.contains(name), "{kind}: names the file: {err}");
+        for n in needles {
+            assert!(line.contains(n), "{kind}: `{n}` missing in: {err}");
+        }
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}
+
+#[test]
+fn run_recipe_errors_name_file_key_and_nearest_name() {
+    let r = |a: &str, b: &str| RECIPE.replace(a, b);
+    check(
+        "recipe",
+        "run.toml",
+        &["simulate", "FILE", "--out", "OUT"],
+        RECIPE,
+        vec![
+            (
+                r("pitch_mm = 3.0", "pich = 3.0"),
+                vec!["[path] pich", "unknown key", "did you mean `pitch_mm`?"],
+            ),
+            (
+                r("[process]", "[proces]"),
+                vec!["[proces]", "unknown table", "did you mean [process]?"],
+            ),
+            (
+                r("sigma_mm = 1.0", "sigmma = 1.0"),
+                vec!["[tif.model] sigmma", "did you mean `sigma_mm`?"],
+            ),
+            (
+                r("pitch_mm = 3.0", "pitch_mm = \"3\""),
+                vec!["[path] pitch_mm", "expected a number", "found string"],
+            ),
+            (
+                r("[path]", "[path"),
+                vec!["TOML", "syntax error", "line 7, column"],
+            ),
+        ],
+    );
+}
+
+#[test]
+fn dwell_case_errors_name_file_key_and_nearest_name() {
+    let r = |a: &str, b: &str| CASE.replace(a, b);
+    check(
+        "dwell case",
+        "case.toml",
+        &["dwell", "FILE", "--out", "OUT"],
+        CASE,
+        vec![
+            (
+                r("sigma_mm", "sigma_nm"),
+                vec!["[tif] sigma_nm", "unknown key", "did you mean `sigma_mm`?"],
+            ),
+            (
+                r("[clear_aperture]", "[clear_apperture]"),
+                vec!["[clear_apperture]", "did you mean [clear_aperture]?"],
+            ),
+            (
+                r("pixel_mm = 0.5", "pixel_mm = \"0.5\""),
+                vec!["pixel_mm", "expected a number"],
+            ),
+            (
+                r("rows = [10, 20]", "rows = [10, 20"),
+                vec!["TOML", "syntax error", "expected `,` at line 10, column 1"],
+            ),
+        ],
+    );
+}
+
+#[test]
+fn spot_manifest_errors_name_file_key_and_nearest_name() {
+    let r = |a: &str, b: &str| MANIFEST.replace(a, b);
+    check(
+        "manifest",
+        "manifest.toml",
+        &["spots", "FILE", "--out", "OUT"],
+        MANIFEST,
+        vec![
+            (
+                r("bonnet = ", "bonet = "),
+                vec!["[spot] bonet", "unknown key", "did you mean `bonnet`?"],
+            ),
+            (
+                r("[defaults]", "[defualts]"),
+                vec!["[defualts]", "did you mean [defaults]?"],
+            ),
+            (
+                r("offset_mm = 0.8", "offset_mm = \"0.8\""),
+                vec!["[defaults] offset_mm", "expected a number"],
+            ),
+            (
+                r("file = \"a.dat\"", "file = \"a.dat"),
+                vec!["TOML", "syntax error", "line 9"],
+            ),
+        ],
+    );
+}
+
+#[test]
+fn vibration_table_errors_name_file_key_and_nearest_name() {
+    let r = |a: &str, b: &str| VIBRATION.replace(a, b);
+    check(
+        "vibration",
+        "vib.toml",
+        &["vibration", "FILE", "--json", "-"],
+        VIBRATION,
+        vec![
+            (
+                r("fn_n = 3.0", "fn_nn = 3.0"),
+                vec!["[vibration] fn_nn", "unknown key", "did you mean `fn_n`?"],
+            ),
+            (
+                r("[vibration]", "[vibraton]"),
+                vec!["[vibraton]", "did you mean [vibration]?"],
+            ),
+            (
+                r("mu = 0.3", "mu = \"high\""),
+                vec!["[vibration] mu", "expected a number"],
+            ),
+            (
+                r("mu = 0.3", "mu = "),
+                vec!["TOML", "syntax error", "line 6"],
+            ),
+        ],
+    );
+}
