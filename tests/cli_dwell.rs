@@ -175,7 +175,7 @@ fn unknown_keys_and_syntax_errors_name_file_key_and_cause() {
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("syntax.toml") && err.contains("line 2") && err.contains("TOML syntax"),
+        err.contains("syntax.toml") && err.contains("line 2") && err.contains("syntax error"),
         "{err}"
     );
     assert_eq!(err.trim().lines().count(), 1);
