@@ -46,18 +46,19 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
 }
 
 /// The candidate nearest to `name` (ties: the first listed): the smallest edit distance to
-/// one of the candidate's prefixes plus half the characters left out, so a name typed short
-/// (`pich` for `pitch_mm`) is matched by its start rather than by an unrelated short name.
+/// one of the candidate's prefixes, then the fewest characters left out, so a name typed short
+/// (`pich` for `pitch_mm`, `k1` for `k1_n_per_mm`) is matched by its start rather than by an
+/// unrelated short name.
 pub fn nearest<'a>(name: &str, candidates: &[&'a str]) -> Option<&'a str> {
-    let score = |c: &str| -> usize {
+    let score = |c: &str| -> (usize, usize) {
         let chars: Vec<(usize, char)> = c.char_indices().collect();
         (0..=chars.len())
             .map(|k| {
                 let end = chars.get(k).map_or(c.len(), |&(i, _)| i);
-                2 * edit_distance(name, &c[..end]) + (chars.len() - k)
+                (edit_distance(name, &c[..end]), chars.len() - k)
             })
             .min()
-            .unwrap_or(usize::MAX)
+            .unwrap_or((usize::MAX, usize::MAX))
     };
     candidates.iter().min_by_key(|c| score(c)).copied()
 }
