@@ -137,6 +137,23 @@ fn show(c: &BonnetsComparison) {
             r.fit_tif_scale,
             r.vibration_forcing
         );
+        let cal = &r.calibration;
+        let mut top: Vec<(String, f64)> = cal
+            .rounds
+            .first()
+            .map(|r| r.candidates.iter().map(|c| (c.key.clone(), c.z)).collect())
+            .unwrap_or_default();
+        top.sort_by(|a, b| b.1.total_cmp(&a.1));
+        top.truncate(4);
+        eprintln!(
+            "  calibration: baseline {:.4} nm (rate scale {:.4}), final {:.4} nm, noise floor \
+             {:.4} nm, measured removal {:.4} nm; first round best {top:?}",
+            cal.baseline.residual_rms_nm,
+            cal.baseline.rate_scale,
+            cal.final_.residual_rms_nm,
+            cal.noise_floor_rms_nm,
+            cal.baseline.measured_removal_rms_nm
+        );
     }
     for d in &c.difference {
         eprintln!("{d:#?}\nvibration share {:.4}", vibration_share(d));
@@ -152,6 +169,11 @@ fn within(x: f64, truth: f64, tol: f64) -> bool {
 
 /// Two runs of the same bonnet, forcing (5 N at the x2 resonance) and path; the only
 /// difference is the robot damping (ζ 0.05 vs 0.1075).
+///
+/// Measured: calibration (vibration taken back) accepts no effect in either run; fitted
+/// 5.05 N [4.71, 5.40] and 5.22 N [4.84, 5.62]; one shared forcing 5.13 N (p = 0.42);
+/// σ1 B − A = +0.141 nm; normal_offset 0.992 (significant), all vibration mechanisms 0.996,
+/// removal_rate −0.103 (not significant), unexplained 0.11.
 #[test]
 fn damping_pair_forcing_within_30_percent_and_difference_attributed_to_vibration() {
     let t = tif(1.0);
@@ -166,6 +188,8 @@ fn damping_pair_forcing_within_30_percent_and_difference_attributed_to_vibration
         assert!(within(f, FN_TRUE, 0.3), "{}: fitted {f} N vs 5 N", r.name);
         assert!(r.predicted.sigma1_nm.is_some() && r.predicted.msf_rms_nm > 0.0);
     }
+    let sh = c.shared_forcing.as_ref().unwrap();
+    assert!(sh.consistent && sh.plausible, "{}", sh.reason);
     let d = &c.difference[0];
     assert!(d.sigma1_difference_nm.abs() > 0.05, "{d:?}");
     let vib = vibration_share(d);
@@ -177,22 +201,36 @@ fn damping_pair_forcing_within_30_percent_and_difference_attributed_to_vibration
 }
 
 /// Identical vibration, but run B's working spot is 15 % wider than the recipe's (same volume
-/// rate): calibration must find the wider spot and the vibration get under 10 % of the σ1
-/// difference.
+/// rate): the vibration must get under 10 % of the σ1 difference. On this raster (the path
+/// covers the whole map, piston removed) the wider spot's ripple at the pitch is the nominal
+/// spot's at a lower rate (exp(−2π²σ²/p²): 0.49 of it), so no map can tell the two apart:
+/// the calibration finds no `tif_scale` and the difference goes to `removal_rate` (the
+/// calibration's baseline rate scale), which the report says stands for either.
+///
+/// Measured: B's calibrated baseline rate scale 0.489 (A 1.000), no effect accepted;
+/// σ1 B − A = −8.04 nm; removal_rate 1.037 (significant), vibration mechanisms 0.008. B's
+/// forcing, fitted on the nominal spot, is 7.97 N (truth 5 N): the spot cannot be told from
+/// the rate here, and the fit absorbs part of the mismatch.
 #[test]
 fn wider_spot_pair_gives_vibration_less_than_10_percent() {
     let a = run("A", &params(ZETA), &tif(1.0), 1050);
     let b = run("B", &params(ZETA), &tif(1.15), 1051);
     let c = compare_runs(&[a, b], &opts()).unwrap();
     show(&c);
-    let s = c.runs[1].fit_tif_scale;
-    assert!((s - 1.15).abs() < 0.03, "calibrated tif scale {s}");
     let d = &c.difference[0];
     let vib = vibration_share(d);
     assert!(d.sigma1_difference_nm < -1.0, "{d:?}");
     assert!(vib.abs() < 0.1, "vibration share {vib}");
-    assert_eq!(d.causes[0].cause, "tif_scale", "{d:?}");
-    assert!(d.causes[0].significant);
+    let top = &d.causes[0];
+    assert!(
+        ["removal_rate", "tif_scale"].contains(&top.cause.as_str()),
+        "{d:?}"
+    );
+    assert!(top.significant, "{d:?}");
+    assert!(
+        (0.8..=1.2).contains(&top.share_of_sigma1_difference),
+        "{d:?}"
+    );
 }
 
 fn bin() -> Command {
@@ -231,7 +269,12 @@ fn write_run(dir: &Path, r: &RunInput, zeta: f64, bonnet: &str) -> PathBuf {
 fn cli_compare_recipe_runs_writes_the_contract_fields() {
     let dir = tempfile::tempdir().unwrap();
     let t = tif(1.0);
-    let a = write_run(dir.path(), &run("A", &params(ZETA), &t, 1050), ZETA, "original");
+    let a = write_run(
+        dir.path(),
+        &run("A", &params(ZETA), &t, 1050),
+        ZETA,
+        "original",
+    );
     let b = write_run(
         dir.path(),
         &run("B", &params(ZETA_DAMPED), &t, 1051),
@@ -264,7 +307,13 @@ fn cli_compare_recipe_runs_writes_the_contract_fields() {
             assert!(!m[0][k].is_null(), "mechanism {k}");
         }
         let cal = &r["calibration"];
-        for k in ["baseline", "final", "noise_floor_rms_nm", "effects", "unexplained"] {
+        for k in [
+            "baseline",
+            "final",
+            "noise_floor_rms_nm",
+            "effects",
+            "unexplained",
+        ] {
             assert!(!cal[k].is_null(), "calibration {k}");
         }
         let f = &r["vibration_forcing"];

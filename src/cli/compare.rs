@@ -162,10 +162,12 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             remove: settings.remove.clone(),
             ..Default::default()
         };
-        Some(bonnets::compare_runs(&recipes, &opts).map_err(|e| CliError {
-            code: e.exit_code,
-            message: e.message,
-        })?)
+        Some(
+            bonnets::compare_runs(&recipes, &opts).map_err(|e| CliError {
+                code: e.exit_code,
+                message: e.message,
+            })?,
+        )
     };
     // An unwritable output is bad input (exit 2); the message already names the file.
     write_report_full(&args.out, &c, None, bonnets.as_ref()).map_err(|e| CliError {

@@ -15,9 +15,12 @@
 //!   is before − registered after on the common valid pixels;
 //! - `vibration_forcing`: the forcing fitted to the measured removal's X and Y PSDs, on the
 //!   calibrated TIF (the recipe's widened by an accepted `tif_scale`);
-//! - the run's causes: the coupling mechanisms at the fitted forcing, and each accepted
-//!    calibrated effect (the counterfactual without its added removal; SD from the effect's
-//!    largest relative parameter uncertainty).
+//! - the run's causes: the coupling mechanisms at the fitted forcing; each accepted calibrated
+//!   effect (the counterfactual without its added removal; SD from the effect's largest
+//!   relative parameter uncertainty); and, without an accepted `tif_scale`, `removal_rate`: the
+//!   calibration's baseline rate scale against the recipe's rate (a wider spot and a lower rate
+//!   leave the same ripple when the removal depth is lost to piston removal; SD from the noise
+//!   floor and the forward model's accuracy).
 //!
 //! Measured σ1 is the ripple at 1/pitch along Y of the registered after map (nm); CR(RMS) is
 //! (RMS before − RMS after) / RMS before with the form terms removed; MSF band RMS is along Y
@@ -105,8 +108,7 @@ pub struct RunInput {
 impl RunInput {
     /// Reads a recipe and everything it names; errors name the file at fault.
     pub fn load(name: &str, recipe_file: &Path) -> Result<RunInput, BonnetsError> {
-        let recipe =
-            Recipe::load(recipe_file).map_err(|e| BonnetsError::input(recipe_file, e))?;
+        let recipe = Recipe::load(recipe_file).map_err(|e| BonnetsError::input(recipe_file, e))?;
         let read = |p: &Path| {
             bonnetlab_io::read_surface(p).map_err(|e| {
                 let code = e.exit_code();
@@ -230,8 +232,7 @@ struct Scaled<'a> {
 
 impl RateField for Scaled<'_> {
     fn rate_at_mm(&self, dx_mm: f64, dy_mm: f64) -> f64 {
-        self.base
-            .rate_at_mm(dx_mm / self.scale, dy_mm / self.scale)
+        self.base.rate_at_mm(dx_mm / self.scale, dy_mm / self.scale)
     }
     fn half_extent_mm(&self) -> (f64, f64) {
         let (x, y) = self.base.half_extent_mm();
@@ -391,9 +392,10 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
                         .map_err(|e| ierr(&e))?,
                     );
                 }
-                let (z, v) = raw_problem.as_ref().map(|p| p.resample_after(r)).unwrap_or_else(
-                    || (run.after.heights_nm().clone(), run.after.valid().clone()),
-                );
+                let (z, v) = raw_problem
+                    .as_ref()
+                    .map(|p| p.resample_after(r))
+                    .unwrap_or_else(|| (run.after.heights_nm().clone(), run.after.valid().clone()));
                 Some(Surface::with_mask(z, v, Some(dx), Some(dy)).map_err(|e| perr(&e))?)
             }
             None => None,
@@ -450,14 +452,47 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
             0.0
         },
     };
-    let mut causes = vibration_effects(&model, &fit, &before, &after, &opts.remove)
-        .map_err(|e| perr(&e))?;
+    let mut causes =
+        vibration_effects(&model, &fit, &before, &after, &opts.remove).map_err(|e| perr(&e))?;
     for (e, (kind, added)) in cal.effects.iter().zip(&cal.maps.effect_removal_nm) {
         let (ds, dc) = counterfactual_effect(&before, &after, added, run.pitch_mm, &opts.remove)
             .map_err(|e| perr(&e))?;
         let rel = relative_uncertainty(e);
         causes.push(CauseEffect {
             cause: kind.clone(),
+            sigma1_nm: ds,
+            sigma1_sd_nm: ds.abs() * rel,
+            cr_rms: dc,
+            cr_rms_sd: dc.abs() * rel,
+        });
+    }
+    // The removal rate against the recipe's (calibration's baseline rate scale), when no TIF
+    // scale was accepted: with piston removed, a wider spot and a lower rate leave the same
+    // ripple at the pitch, so this cause stands for either.
+    if scale == 1.0 {
+        let c = cal.baseline.rate_scale;
+        let base = model.maps(0.0, 0.0).baseline;
+        let added = &base * (c - 1.0);
+        let (ds, dc) = counterfactual_effect(&before, &after, &added, run.pitch_mm, &opts.remove)
+            .map_err(|e| perr(&e))?;
+        // Least-squares standard error of a scale on the model removal with white noise at the
+        // calibration's noise floor, and the forward model's own accuracy, in quadrature.
+        let ss: f64 = ndarray::Zip::from(&base)
+            .and(before.valid())
+            .fold(0.0, |acc, &v, &ok| if ok { acc + v * v } else { acc });
+        let sd_noise = if ss > 0.0 {
+            cal.noise_floor_rms_nm / ss.sqrt()
+        } else {
+            0.0
+        };
+        let sd_c = sd_noise.hypot(bonnetlab_calibrate::run::MODEL_ACCURACY);
+        let rel = if (c - 1.0).abs() > 0.0 {
+            (sd_c / (c - 1.0).abs()).min(1.0)
+        } else {
+            1.0
+        };
+        causes.push(CauseEffect {
+            cause: "removal_rate".into(),
             sigma1_nm: ds,
             sigma1_sd_nm: ds.abs() * rel,
             cr_rms: dc,

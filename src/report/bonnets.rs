@@ -42,7 +42,10 @@ pub fn extended_json<T: Serialize>(doc: &T, b: &BonnetsComparison) -> Result<Val
             };
             if let Some(o) = r.as_object_mut() {
                 o.insert("bonnet".into(), Value::String(a.bonnet.name().into()));
-                o.insert("predicted".into(), serde_json::to_value(&a.predicted).map_err(err)?);
+                o.insert(
+                    "predicted".into(),
+                    serde_json::to_value(&a.predicted).map_err(err)?,
+                );
                 o.insert(
                     "calibration".into(),
                     serde_json::to_value(&a.calibration).map_err(err)?,
@@ -88,12 +91,14 @@ fn pct(v: f64) -> String {
 
 /// The forcing in words: the value with its interval, an upper bound, or why not.
 pub fn forcing_words(f: &VibrationForcing) -> String {
-    let amp = |a: Option<f64>| match a {
+    let amp = |a: Option<f64>| {
+        match a {
         Some(a) => format!(
             "; end-of-robot amplitude {a:.3e} mm ({:.2} x the paper's ~{PAPER_END_AMPLITUDE_MM:.0e} mm)",
             a / PAPER_END_AMPLITUDE_MM
         ),
         None => String::new(),
+    }
     };
     match (f.constrained, f.fn_n, f.interval_n, f.upper_bound_n) {
         (true, Some(v), Some([lo, hi]), _) => format!(
@@ -117,6 +122,11 @@ pub fn what_would_change(cause: &str) -> &'static str {
              spindle speed (the imprint moves with the spindle frequency)"
         }
         "tif_scale" => "a spot measurement (a spot sweep) with each bonnet on the same part",
+        "removal_rate" => {
+            "a spot measurement with each bonnet, or the absolute removal depth (a masked \
+             reference area): with piston removed a wider spot and a lower rate leave the same \
+             ripple"
+        }
         "registration" => "re-measuring the after map with fiducials or a fixed mount",
         "direction_lag" | "periodic_path_error" | "path_offset" => {
             "the robot's executed-path log (encoder positions) for each run"

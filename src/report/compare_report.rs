@@ -13,9 +13,9 @@ use super::comparison::{fmt_sig, BandCr, Comparison, RunResult};
 use super::html::{Page, Table};
 use super::maps::{false_colour_png_with, valid_range, MapOptions};
 use super::msf_prediction::PredictedMsf;
-use crate::pipeline::bonnets::BonnetsComparison;
 use super::plot::{LinePlot, Series, PALETTE};
 use super::write;
+use crate::pipeline::bonnets::BonnetsComparison;
 
 /// A failure writing the report: the file and what went wrong.
 #[derive(Debug, thiserror::Error)]

@@ -50,9 +50,8 @@ impl RunSpec {
 pub fn parse_recipe_run(s: &str) -> Option<(String, PathBuf)> {
     let (name, file) = s.split_once('=')?;
     let (name, file) = (name.trim(), file.trim());
-    let is_recipe = !name.is_empty()
-        && !file.contains(',')
-        && file.to_ascii_lowercase().ends_with(".toml");
+    let is_recipe =
+        !name.is_empty() && !file.contains(',') && file.to_ascii_lowercase().ends_with(".toml");
     is_recipe.then(|| (name.to_string(), PathBuf::from(file)))
 }
 

@@ -12,11 +12,11 @@ use bonnetlab_surface::{Surface, Term};
 use bonnetlab_vibration::coupling::{
     direct_removal, fast_maps, predict, CouplingInput, CouplingOptions,
 };
+use bonnetlab_vibration::infer::synth::{measured_pair, white_noise};
 use bonnetlab_vibration::infer::{
     attribute_difference, counterfactual_effect, infer_forcing, shared_forcing, vibration_effects,
     CauseEffect, Difference, ForcingFit, ForcingModel, InferOptions, RunEffects,
 };
-use bonnetlab_vibration::infer::synth::{measured_pair, white_noise};
 use bonnetlab_vibration::params::{Bonnet, VibrationParams};
 use ndarray::Array2;
 
