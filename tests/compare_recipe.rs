@@ -13,6 +13,7 @@ use bonnetlab::pipeline::bonnets::{compare_runs, BonnetsComparison, Options, Run
 use bonnetlab::process::path::log::path_to_csv;
 use bonnetlab::process::path::RasterSpec;
 use bonnetlab::process::recipe::TifSource;
+use bonnetlab::process::simulate::ToolModel;
 use bonnetlab::process::tif::GaussianTif;
 use bonnetlab::process::{Grid, PathLog};
 use bonnetlab::surface::Surface;
@@ -70,10 +71,11 @@ fn coupling(seed: u64) -> CouplingOptions {
 fn run(name: &str, truth: &VibrationParams, true_tif: &GaussianTif, noise_seed: u64) -> RunInput {
     let grid = Grid::new(N, N, D, D, 0.0, 0.0).unwrap();
     let p = path();
+    let tool = ToolModel::from_source(&TifSource::Gaussian(*true_tif), None, D, D).unwrap();
     let input = CouplingInput {
         grid,
         valid: None,
-        base_tif: true_tif,
+        tool: &tool,
         path: &p,
         params: truth,
         pitch_mm: Some(PITCH),
@@ -171,7 +173,7 @@ fn within(x: f64, truth: f64, tol: f64) -> bool {
 /// difference is the robot damping (ζ 0.05 vs 0.1075).
 ///
 /// Measured: calibration (vibration taken back) accepts no effect in either run; fitted
-/// 5.05 N [4.71, 5.40] and 5.22 N [4.84, 5.62]; one shared forcing 5.13 N (p = 0.42);
+/// 5.04 N [4.71, 5.40] and 5.21 N [4.84, 5.61]; one shared forcing 5.13 N (p = 0.42);
 /// σ1 B − A = +0.141 nm; normal_offset 0.992 (significant), all vibration mechanisms 0.996,
 /// removal_rate −0.103 (not significant), unexplained 0.11.
 #[test]
@@ -209,7 +211,7 @@ fn damping_pair_forcing_within_30_percent_and_difference_attributed_to_vibration
 ///
 /// Measured: B's calibrated baseline rate scale 0.489 (A 1.000), no effect accepted;
 /// σ1 B − A = −8.04 nm; removal_rate 1.037 (significant), vibration mechanisms 0.008. B's
-/// forcing, fitted on the nominal spot, is 7.97 N (truth 5 N): the spot cannot be told from
+/// forcing, fitted on the nominal spot, is 7.96 N (truth 5 N): the spot cannot be told from
 /// the rate here, and the fit absorbs part of the mismatch.
 #[test]
 fn wider_spot_pair_gives_vibration_less_than_10_percent() {

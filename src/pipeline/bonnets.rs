@@ -245,6 +245,36 @@ impl RateField for Scaled<'_> {
     }
 }
 
+/// The tool widened by `scale`: a Gaussian model as the same model with its width scaled (the
+/// project's front end), any other TIF as the scaled field sampled at the map pitch.
+fn scaled_tool_model(
+    src: &TifSource,
+    tool: &ToolModel,
+    scale: f64,
+    dx: f64,
+    dy: f64,
+) -> Result<ToolModel, bonnetlab_process::ProcessError> {
+    match src {
+        TifSource::Gaussian(g) => {
+            let w = bonnetlab_process::tif::GaussianTif::new(
+                g.sigma_mm * scale,
+                g.diameter_mm * scale,
+                g.peak_rate_nm_per_s,
+            )?;
+            ToolModel::from_source(&TifSource::Gaussian(w), None, dx, dy)
+        }
+        _ => {
+            let f = Scaled {
+                base: tool.field(),
+                scale,
+            };
+            Ok(ToolModel::Sampled(bonnetlab_process::tif::Tif::sample(
+                &f, dx, dy,
+            )?))
+        }
+    }
+}
+
 fn num(e: &EffectReport, key: &str) -> Option<f64> {
     e.params.get(key).and_then(|v| v.as_f64())
 }
@@ -334,7 +364,7 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
     let input = CouplingInput {
         grid,
         valid: Some(before0.valid()),
-        base_tif: tool.field(),
+        tool: &tool,
         path: &run.path,
         params: &run.params,
         pitch_mm: Some(run.pitch_mm),
@@ -358,6 +388,7 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
     let mut scale = 1.0;
     let mut raw_problem = None;
     let mut state = None;
+    let mut scaled_tool;
     for _round in 0..2 {
         let corrected = run
             .after
@@ -402,12 +433,10 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
         };
         let moved = (new_scale - scale).abs() > 0.005;
         if moved {
-            let scaled = Scaled {
-                base: tool.field(),
-                scale: new_scale,
-            };
+            scaled_tool =
+                scaled_tool_model(&run.tif, &tool, new_scale, dx, dy).map_err(|e| perr(&e))?;
             let inp = CouplingInput {
-                base_tif: &scaled,
+                tool: &scaled_tool,
                 ..input
             };
             model = ForcingModel::build(&inp, run.bonnet, &opts.coupling).map_err(|e| perr(&e))?;
