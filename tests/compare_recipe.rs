@@ -357,6 +357,12 @@ fn cli_compare_recipe_runs_writes_the_contract_fields() {
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("Bonnets: measured vs predicted ripple"));
     assert!(html.contains("Vibration forcing inferred from the measurements"));
+    // Conclusions in words, with how sure and what would change them; the forcing next to the
+    // paper's amplitude.
+    assert!(html.contains("What would change this"));
+    assert!(html.contains("95 % sure") || html.contains("not explained with confidence"));
+    assert!(html.contains("end-of-robot amplitude") && html.contains("paper&#39;s ~1e-2 mm"));
+    assert!(html.contains("unexplained"));
 
     // A bad recipe: one line naming it, exit 2, nothing written.
     let bad = dir.path().join("bad.toml");
