@@ -209,8 +209,9 @@ fn damping_pair_forcing_within_30_percent_and_difference_attributed_to_vibration
 /// the calibration finds no `tif_scale` and the difference goes to `removal_rate` (the
 /// calibration's baseline rate scale), which the report says stands for either.
 ///
-/// Measured: B's calibrated baseline rate scale 0.489 (A 1.000), no effect accepted;
-/// σ1 B − A = −8.04 nm; removal_rate 1.037 (significant), vibration mechanisms 0.008. B's
+/// Measured: B's calibrated baseline rate scale 0.489 (A 1.000); B accepts a 0.034 mm
+/// periodic path error at the pitch (share 0.001); σ1 B − A = −8.04 nm; removal_rate 1.038
+/// (significant), vibration mechanisms 0.008, unexplained −0.047. B's
 /// forcing, fitted on the nominal spot, is 7.96 N (truth 5 N): the spot cannot be told from
 /// the rate here, and the fit absorbs part of the mismatch.
 #[test]
