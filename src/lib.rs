@@ -14,4 +14,5 @@ pub use bonnetlab_surface as surface;
 pub use bonnetlab_vibration as vibration;
 
 pub mod cli;
+pub mod pipeline;
 pub mod report;

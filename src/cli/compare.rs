@@ -6,15 +6,19 @@ use std::path::{Path, PathBuf};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use super::CliError;
-use crate::report::compare_report::write_report;
+use crate::pipeline::bonnets::{self, RunInput};
+use crate::report::compare_report::write_report_full;
 use crate::report::comparison::{compare, CompareError, Comparison, RunSpec, Settings};
 use crate::report::format::fixed;
+use crate::report::run_spec::parse_recipe_run;
+use bonnetlab_process::recipe::Recipe;
 use bonnetlab_spectrum::Window;
 use bonnetlab_surface::Term;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// A run: NAME=BEFORE,AFTER; repeat measurements as NAME=B1+B2,A1+A2. The first run is
+    /// A run: NAME=BEFORE,AFTER; repeat measurements as NAME=B1+B2,A1+A2; or NAME=RECIPE.toml
+    /// (measured, predicted, calibrated and its vibration forcing inferred). The first run is
     /// the reference for the improvement of the others.
     #[arg(long = "run", value_name = "NAME=BEFORE,AFTER", required = true)]
     pub runs: Vec<String>,
@@ -63,10 +67,25 @@ pub fn hint_pixel_mm(message: String) -> String {
 
 /// Turns the command-line words into run specs and settings.
 pub fn parse(args: &Args) -> Result<(Vec<RunSpec>, Settings), CliError> {
+    let mut recipe_pitch = None;
     let runs = args
         .runs
         .iter()
-        .map(|r| RunSpec::parse(r).map_err(|e| CliError::usage(format!("--run: {e}"))))
+        .map(|r| match parse_recipe_run(r) {
+            Some((name, file)) => {
+                let recipe = Recipe::load(&file).map_err(|e| CliError {
+                    code: 2,
+                    message: e.to_string(),
+                })?;
+                recipe_pitch = recipe_pitch.or(recipe.pitch_mm);
+                Ok(RunSpec {
+                    name,
+                    before: vec![recipe.before],
+                    after: recipe.after.into_iter().collect(),
+                })
+            }
+            None => RunSpec::parse(r).map_err(|e| CliError::usage(format!("--run: {e}"))),
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let remove =
         Term::parse_list(&args.remove).map_err(|e| CliError::usage(format!("--remove: {e}")))?;
@@ -77,7 +96,7 @@ pub fn parse(args: &Args) -> Result<(Vec<RunSpec>, Settings), CliError> {
         Settings {
             remove,
             window,
-            pitch_mm: args.pitch_mm,
+            pitch_mm: args.pitch_mm.or(recipe_pitch),
             pixel_mm: pixel_size(args.pixel_mm, args.pixel_mm_y)?,
             ..Settings::default()
         },
@@ -118,11 +137,40 @@ pub fn compare_with_progress(
     r
 }
 
+/// The runs given by their recipes, read (errors name the file, exit code 2 for bad input).
+pub fn recipe_runs(args: &Args) -> Result<Vec<RunInput>, CliError> {
+    args.runs
+        .iter()
+        .filter_map(|r| parse_recipe_run(r))
+        .map(|(name, file)| {
+            RunInput::load(&name, &file).map_err(|e| CliError {
+                code: e.exit_code,
+                message: e.message,
+            })
+        })
+        .collect()
+}
+
 pub fn run(args: &Args) -> Result<(), CliError> {
     let (runs, settings) = parse(args)?;
+    let recipes = recipe_runs(args)?;
     let c = compare_with_progress(&runs, &settings, false)?;
+    let bonnets = if recipes.is_empty() {
+        None
+    } else {
+        let opts = bonnets::Options {
+            remove: settings.remove.clone(),
+            ..Default::default()
+        };
+        Some(
+            bonnets::compare_runs(&recipes, &opts).map_err(|e| CliError {
+                code: e.exit_code,
+                message: e.message,
+            })?,
+        )
+    };
     // An unwritable output is bad input (exit 2); the message already names the file.
-    write_report(&args.out, &c).map_err(|e| CliError {
+    write_report_full(&args.out, &c, None, bonnets.as_ref()).map_err(|e| CliError {
         code: 2,
         message: e.to_string(),
     })?;

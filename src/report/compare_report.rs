@@ -15,6 +15,7 @@ use super::maps::{false_colour_png_with, valid_range, MapOptions};
 use super::msf_prediction::PredictedMsf;
 use super::plot::{LinePlot, Series, PALETTE};
 use super::write;
+use crate::pipeline::bonnets::BonnetsComparison;
 
 /// A failure writing the report: the file and what went wrong.
 #[derive(Debug, thiserror::Error)]
@@ -105,18 +106,30 @@ pub fn write_report_with(
     c: &Comparison,
     predicted_msf: Option<&[PredictedMsf]>,
 ) -> Result<Vec<PathBuf>, ReportError> {
+    write_report_full(dir, c, predicted_msf, None)
+}
+
+/// [`write_report_with`] plus, for runs given by their recipes, the bonnets section (HTML) and
+/// the `predicted`, `calibration`, `vibration_forcing` and `difference` fields (JSON).
+pub fn write_report_full(
+    dir: &Path,
+    c: &Comparison,
+    predicted_msf: Option<&[PredictedMsf]>,
+    bonnets: Option<&BonnetsComparison>,
+) -> Result<Vec<PathBuf>, ReportError> {
     // Everything is rendered before anything is staged, and staged before anything is published.
-    let html = render_html_with(c, predicted_msf)?;
+    let html = render_html_full(c, predicted_msf, bonnets)?;
     let mut set = write::Set::begin(dir)?;
     let mut written = Vec::new();
     let json_path = dir.join("report.json");
-    set.json(
-        "report.json",
-        &ReportJson {
-            comparison: c,
-            predicted_msf,
-        },
-    )?;
+    let doc = ReportJson {
+        comparison: c,
+        predicted_msf,
+    };
+    match bonnets {
+        Some(b) => set.json("report.json", &super::bonnets::extended_json(&doc, b)?)?,
+        None => set.json("report.json", &doc)?,
+    }
     written.push(json_path);
     for (r, stem) in c.runs.iter().zip(run_stems(c)) {
         for (axis, b, a) in [
@@ -152,6 +165,15 @@ pub fn render_html_with(
     c: &Comparison,
     predicted_msf: Option<&[PredictedMsf]>,
 ) -> Result<String, ReportError> {
+    render_html_full(c, predicted_msf, None)
+}
+
+/// [`render_html_with`] with the bonnets section after the predicted MSF section.
+pub fn render_html_full(
+    c: &Comparison,
+    predicted_msf: Option<&[PredictedMsf]>,
+    bonnets: Option<&BonnetsComparison>,
+) -> Result<String, ReportError> {
     let mut page = Page::new("Bonnet run comparison");
     page.note(&format!(
         "{} {} \u{2014} {} run(s); form terms removed: {}; PSD window: {}{}.",
@@ -173,6 +195,9 @@ pub fn render_html_with(
     }
     if let Some(p) = predicted_msf {
         super::msf_prediction::section(&mut page, p);
+    }
+    if let Some(b) = bonnets {
+        super::bonnets::section(&mut page, b);
     }
     psd_section(&mut page, c)?;
     maps_section(&mut page, c)?;

@@ -1,6 +1,7 @@
 //! Rendering result structs for people (HTML with inline plots) and pipelines (JSON, CSV).
 //! Nothing outside this module formats text for people.
 
+pub mod bonnets;
 pub mod compare_report;
 pub mod comparison;
 pub mod dwell_report;

@@ -45,6 +45,16 @@ impl RunSpec {
     }
 }
 
+/// `NAME=RECIPE.toml`: a run given by its recipe (one file after '=', ending in `.toml`).
+/// None for any other form (see [`RunSpec::parse`]).
+pub fn parse_recipe_run(s: &str) -> Option<(String, PathBuf)> {
+    let (name, file) = s.split_once('=')?;
+    let (name, file) = (name.trim(), file.trim());
+    let is_recipe =
+        !name.is_empty() && !file.contains(',') && file.to_ascii_lowercase().ends_with(".toml");
+    is_recipe.then(|| (name.to_string(), PathBuf::from(file)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -62,5 +72,11 @@ mod tests {
         assert!(RunSpec::parse("=b,a").is_err());
         assert!(RunSpec::parse("x=b.dat").is_err());
         assert!(RunSpec::parse("x=,a.dat").is_err());
+        assert_eq!(
+            parse_recipe_run("orig=runs/a.toml"),
+            Some(("orig".into(), PathBuf::from("runs/a.toml")))
+        );
+        assert_eq!(parse_recipe_run("orig=b.dat,a.dat"), None);
+        assert_eq!(parse_recipe_run("=a.toml"), None);
     }
 }

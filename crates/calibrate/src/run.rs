@@ -94,6 +94,10 @@ pub struct Maps {
     pub measured_removal_nm: Option<(Array2<f64>, Array2<bool>)>,
     pub baseline_residual_nm: Option<(Array2<f64>, Array2<bool>)>,
     pub final_residual_nm: Option<(Array2<f64>, Array2<bool>)>,
+    /// Each accepted effect's added removal (nm, full grid, 0 outside the fitted aperture): the
+    /// final model's removal minus the same model, same linear coefficients, without that
+    /// effect. In the order of `effects`; the input of counterfactual attribution.
+    pub effect_removal_nm: Vec<(String, Array2<f64>)>,
     pub dx_mm: f64,
     pub dy_mm: f64,
 }
@@ -420,6 +424,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         }
     }
     let lin = ev.linear(&f);
+    maps.effect_removal_nm = effect_removals(p, &effects, &ev, &f)?;
     let sig = if effects.is_empty() {
         Vec::new()
     } else {
@@ -483,6 +488,40 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         rounds,
         maps,
     })
+}
+
+/// Model removal on the analysis pixels: the columns of `ev` weighted by the coefficients of
+/// `names` / `coef` (columns whose name is not there contribute nothing).
+fn model_values(ev: &Eval, names: &[String], coef: &[f64]) -> Vec<f64> {
+    let mut v = vec![0.0; ev.m.len()];
+    for (name, col) in ev.names.iter().zip(&ev.cols) {
+        if let Some(k) = names.iter().position(|n| n == name) {
+            for (o, c) in v.iter_mut().zip(col) {
+                *o += coef[k] * c;
+            }
+        }
+    }
+    v
+}
+
+/// Each accepted effect's added removal (see [`Maps::effect_removal_nm`]).
+fn effect_removals(
+    p: &Problem,
+    effects: &[Box<dyn Effect>],
+    ev: &Eval,
+    f: &Fit,
+) -> Result<Vec<(String, Array2<f64>)>, CalibrateError> {
+    let all = model_values(ev, &ev.names, &f.coef);
+    let mut out = Vec::with_capacity(effects.len());
+    for k in 0..effects.len() {
+        let mut without = effects.to_vec();
+        without.remove(k);
+        let ev_k = crate::model::evaluate(p, &without, None)?;
+        let rest = model_values(&ev_k, &ev.names, &f.coef);
+        let d: Vec<f64> = all.iter().zip(&rest).map(|(a, b)| a - b).collect();
+        out.push((effects[k].kind().to_string(), p.expand(&d, &ev.w).0));
+    }
+    Ok(out)
 }
 
 /// Accuracy of the forward model relative to the measured removal RMS (issue 14's truth suite:

@@ -8,18 +8,17 @@ use bonnetlab_process::recipe::TifSource;
 use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::tif::GaussianTif;
 use bonnetlab_process::{Grid, PathLog};
-use bonnetlab_surface::rng::Rng;
 use bonnetlab_surface::{Surface, Term};
 use bonnetlab_vibration::coupling::{
     direct_removal, fast_maps, predict, CouplingInput, CouplingOptions,
 };
+use bonnetlab_vibration::infer::synth::{measured_pair, white_noise};
 use bonnetlab_vibration::infer::{
     attribute_difference, counterfactual_effect, infer_forcing, shared_forcing, vibration_effects,
     CauseEffect, Difference, ForcingFit, ForcingModel, InferOptions, RunEffects,
 };
 use bonnetlab_vibration::params::{Bonnet, VibrationParams};
 use ndarray::Array2;
-use std::f64::consts::PI;
 
 const N: usize = 200;
 const D: f64 = 0.25;
@@ -71,34 +70,8 @@ fn opts(seed: u64) -> CouplingOptions {
     }
 }
 
-/// Power-law texture (1-D slope about −2) down to the pixel scale from random-phase modes.
-fn texture(seed: u64) -> Array2<f64> {
-    let mut r = Rng::new(seed);
-    let l = N as f64 * D;
-    let modes: Vec<(f64, f64, f64, f64)> = (0..400)
-        .map(|_| {
-            let f = (1.0 / l) * (0.5 * N as f64).powf(r.uniform());
-            let th = 2.0 * PI * r.uniform();
-            (
-                f * th.cos(),
-                f * th.sin(),
-                8.0 / (f * l).max(1.0),
-                2.0 * PI * r.uniform(),
-            )
-        })
-        .collect();
-    Array2::from_shape_fn((N, N), |(i, j)| {
-        let (x, y) = (j as f64 * D, i as f64 * D);
-        modes
-            .iter()
-            .map(|&(fx, fy, a, ph)| a * (2.0 * PI * (fx * x + fy * y) + ph).cos())
-            .sum::<f64>()
-    })
-}
-
 fn noise(seed: u64, rms: f64) -> Array2<f64> {
-    let mut r = Rng::new(seed);
-    Array2::from_shape_fn((N, N), |_| rms * r.normal())
+    white_noise(N, N, rms, seed)
 }
 
 fn surf(z: Array2<f64>) -> Surface {
@@ -113,8 +86,7 @@ struct Measured {
 }
 
 fn measure(truth_removal: &Array2<f64>, seed: u64, noise_nm: f64) -> Measured {
-    let b = texture(77) + noise(seed, noise_nm);
-    let a = &texture(77) - truth_removal + noise(seed + 1, noise_nm);
+    let (b, a) = measured_pair(truth_removal, D, 77, seed, noise_nm);
     let removal = &b - &a;
     Measured {
         before: surf(b),

@@ -18,6 +18,7 @@
 
 pub mod attribute;
 pub mod fit;
+pub mod synth;
 
 pub use attribute::{
     attribute_difference, counterfactual_effect, vibration_effects, CauseEffect, Difference,

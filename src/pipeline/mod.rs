@@ -1,0 +1,3 @@
+//! Analyses that join several crates for one user question (called by the CLI and by tests).
+
+pub mod bonnets;
