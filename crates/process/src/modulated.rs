@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use crate::error::ProcessError;
 use crate::grid::Grid;
 use crate::path::PathLog;
-use crate::removal::{deposit_one, ExactOptions};
+use crate::removal::{check_exact_budget, deposit_one, exact_step, ExactOptions};
 use crate::tif::RateField;
 
 /// One sub-step of the logged path, as the modulation hook sees it.
@@ -90,18 +90,8 @@ pub fn deposit_exact_modulated(
     mut modulate: impl FnMut(&SubStep) -> Modulation,
 ) -> Result<Array2<f64>, ProcessError> {
     let (ex, ey) = field.half_extent_mm();
-    let step = opts.max_step_mm.unwrap_or_else(|| {
-        let pixel = 0.25 * grid.dx_mm.min(grid.dy_mm);
-        let edge = ex.min(ey) / 80.0;
-        if edge > 0.0 {
-            pixel.min(edge)
-        } else {
-            pixel
-        }
-    });
-    if !(step > 0.0 && step.is_finite()) {
-        return Err(ProcessError::invalid("exact sub-step must be positive"));
-    }
+    let step = exact_step(field, grid, opts)?;
+    check_exact_budget(path, grid, step, opts, (ex, ey))?;
     // (x, y, rate * dt, scale)
     let mut steps: Vec<[f64; 4]> = Vec::new();
     let mut bad: Option<String> = None;

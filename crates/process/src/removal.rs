@@ -605,6 +605,62 @@ pub fn deposit_exact(
 ) -> Result<Array2<f64>, ProcessError> {
     check_weights(path, weights)?;
     let (ex, ey) = field.half_extent_mm();
+    let step = exact_step(field, grid, opts)?;
+    let (xlo, xhi) = (grid.x0_mm - ex, grid.x_mm(grid.cols - 1) + ex);
+    let (ylo, yhi) = (grid.y0_mm - ey, grid.y_mm(grid.rows - 1) + ey);
+    check_exact_budget(path, grid, step, opts, (ex, ey))?;
+    // Deposit in blocks of at most EXACT_BLOCK sub-steps, so memory stays bounded whatever
+    // the path's length.
+    let g = *grid;
+    let zero = || Array2::<f64>::zeros((g.rows, g.cols));
+    let flush = |steps: &[(f64, f64, f64)], out: &mut Array2<f64>| {
+        let chunk = (steps.len() / (4 * rayon::current_num_threads()).max(1)).max(256);
+        let part = steps
+            .par_chunks(chunk)
+            .map(|c| {
+                let mut acc = zero();
+                for &(x, y, w) in c {
+                    deposit_one(
+                        &mut acc,
+                        &g,
+                        |dx, dy| field.rate_at_mm(dx, dy),
+                        x,
+                        y,
+                        w,
+                        ex,
+                        ey,
+                    );
+                }
+                acc
+            })
+            .reduce(zero, |a, b| a + b);
+        *out += &part;
+    };
+    let mut out = zero();
+    let mut steps: Vec<(f64, f64, f64)> = Vec::new();
+    path.for_each_substep(step, opts.max_dt_s, |x, y, dt, k, fr| {
+        if x >= xlo && x <= xhi && y >= ylo && y <= yhi {
+            steps.push((x, y, dt * weight_at(weights, k, fr)));
+            if steps.len() == EXACT_BLOCK {
+                flush(&steps, &mut out);
+                steps.clear();
+            }
+        }
+    });
+    if !steps.is_empty() {
+        flush(&steps, &mut out);
+    }
+    Ok(out)
+}
+
+/// The exact deposition's sub-step (mm): `opts.max_step_mm`, else a quarter pixel and 1/80 of
+/// the footprint's smaller half-extent.
+pub(crate) fn exact_step(
+    field: &dyn RateField,
+    grid: &Grid,
+    opts: &ExactOptions,
+) -> Result<f64, ProcessError> {
+    let (ex, ey) = field.half_extent_mm();
     let step = opts.max_step_mm.unwrap_or_else(|| {
         let pixel = 0.25 * grid.dx_mm.min(grid.dy_mm);
         let edge = ex.min(ey) / 80.0;
@@ -617,6 +673,18 @@ pub fn deposit_exact(
     if !(step > 0.0 && step.is_finite()) {
         return Err(ProcessError::invalid("exact sub-step must be positive"));
     }
+    Ok(step)
+}
+
+/// Refuses, before anything is allocated, an exact deposition that would walk too many
+/// sub-steps or update too many pixels (footprint half-extents `(ex, ey)` mm).
+pub(crate) fn check_exact_budget(
+    path: &PathLog,
+    grid: &Grid,
+    step: f64,
+    opts: &ExactOptions,
+    (ex, ey): (f64, f64),
+) -> Result<(), ProcessError> {
     let (xlo, xhi) = (grid.x0_mm - ex, grid.x_mm(grid.cols - 1) + ex);
     let (ylo, yhi) = (grid.y0_mm - ey, grid.y_mm(grid.rows - 1) + ey);
     // Count before allocating or depositing: every sub-step the walk visits, and (an upper
@@ -654,48 +722,7 @@ pub fn deposit_exact(
             max_dt = opts.max_dt_s,
         )));
     }
-    // Deposit in blocks of at most EXACT_BLOCK sub-steps, so memory stays bounded whatever
-    // the path's length.
-    let g = *grid;
-    let zero = || Array2::<f64>::zeros((g.rows, g.cols));
-    let flush = |steps: &[(f64, f64, f64)], out: &mut Array2<f64>| {
-        let chunk = (steps.len() / (4 * rayon::current_num_threads()).max(1)).max(256);
-        let part = steps
-            .par_chunks(chunk)
-            .map(|c| {
-                let mut acc = zero();
-                for &(x, y, w) in c {
-                    deposit_one(
-                        &mut acc,
-                        &g,
-                        |dx, dy| field.rate_at_mm(dx, dy),
-                        x,
-                        y,
-                        w,
-                        ex,
-                        ey,
-                    );
-                }
-                acc
-            })
-            .reduce(zero, |a, b| a + b);
-        *out += &part;
-    };
-    let mut out = zero();
-    let mut steps: Vec<(f64, f64, f64)> = Vec::with_capacity((inside as usize).min(EXACT_BLOCK));
-    path.for_each_substep(step, opts.max_dt_s, |x, y, dt, k, fr| {
-        if x >= xlo && x <= xhi && y >= ylo && y <= yhi {
-            steps.push((x, y, dt * weight_at(weights, k, fr)));
-            if steps.len() == EXACT_BLOCK {
-                flush(&steps, &mut out);
-                steps.clear();
-            }
-        }
-    });
-    if !steps.is_empty() {
-        flush(&steps, &mut out);
-    }
-    Ok(out)
+    Ok(())
 }
 
 /// Adds `w` times the rate at every pixel within (ex, ey) mm of the tool centre (x, y);
