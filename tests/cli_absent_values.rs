@@ -207,3 +207,49 @@ fn compare_on_a_micron_map_with_a_3_mm_pitch() {
     ));
     assert!(html.contains("absent"));
 }
+
+/// `batch --pitch-mm 3` over a micron map and a map that resolves the pitch: the micron map's
+/// line carries its statistics and `ripple_reason` (not an `error`, not a failed exit), the other
+/// its `ripple` object. Before the fix the micron map's line was an error ("not resolvable",
+/// exit_code 2) and the batch exited 1.
+#[test]
+fn batch_on_a_micron_map_with_a_3_mm_pitch() {
+    let dir = tempfile::tempdir().unwrap();
+    micron_map(dir.path(), "a_small.csv", 5);
+    // 120 x 120 at 0.25 mm (a 30 mm field) with a 3 mm ripple along Y.
+    let mut r = Rng::new(6);
+    let z = Array2::from_shape_fn((120, 120), |(i, _)| {
+        4.0 * (2.0 * std::f64::consts::PI * i as f64 * 0.25 / 3.0).sin() + 0.5 * r.normal()
+    });
+    let big = dir.path().join("b_field.csv");
+    write_surface(
+        &big,
+        &Surface::new(z, Some(0.25), Some(0.25)).unwrap(),
+        MapFormat::Csv,
+    )
+    .unwrap();
+    let out = bonnetlab(&["batch", dir.path().to_str().unwrap(), "--pitch-mm", "3"]);
+    assert!(
+        out.status.success(),
+        "exit {:?}: {}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 2);
+    let (s, b) = (&lines[0], &lines[1]);
+    assert!(s.get("error").is_none() && s.get("ripple").is_none(), "{s}");
+    assert_eq!(
+        s["ripple_reason"].as_str().unwrap(),
+        "not resolvable: the 3 mm pitch is longer than the 0.07 mm field (Y lines)"
+    );
+    assert!(s["rms_nm"].as_f64().unwrap() > 0.0, "{s}");
+    check_absent_have_reasons(s, &BAND_KEYS, "batch[0]");
+    assert!(b.get("ripple_reason").is_none(), "{b}");
+    // A 4 nm sine has an RMS of 4 / sqrt(2) = 2.83 nm, all of it in the f0 band.
+    let sigma1 = b["ripple"]["sigma1_nm"].as_f64().unwrap();
+    assert!((sigma1 / (4.0 / 2f64.sqrt()) - 1.0).abs() < 0.1, "{b}");
+}

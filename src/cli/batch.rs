@@ -1,6 +1,7 @@
 //! `bonnetlab batch (DIR | MANIFEST | MAP) [--pitch-mm P] [--remove TERMS] [--window W] [--jobs N]`:
 //! every map's height statistics (the `stats --json` object) and, with `--pitch-mm`, its
-//! `ripple` object (as in `psd`), one JSON line per map on stdout.
+//! `ripple` object (as in `psd`; where the map cannot resolve the pitch, `ripple_reason` says why
+//! instead), one JSON line per map on stdout.
 //!
 //! - DIR: every file with a map extension (.dat, .datx, .asc, .xyz, .csv, .exr) directly in it,
 //!   sorted by name; MANIFEST: a text file with one map path per line (relative to the
@@ -19,7 +20,9 @@ use serde_json::{json, Value};
 
 use super::stats::{read_map, stats_report};
 use super::CliError;
-use bonnetlab_spectrum::{psd_xy, ripple_from_psds, PsdOptions, RippleOptions, Window};
+use bonnetlab_spectrum::{
+    psd_xy, ripple_from_psds, PsdOptions, RippleOptions, SpectrumError, Window,
+};
 use bonnetlab_surface::Term;
 
 #[derive(Debug, clap::Args)]
@@ -121,14 +124,19 @@ pub fn map_line(
                 ..PsdOptions::default()
             };
             let (x, y) = psd_xy(&s, &opts).map_err(|e| CliError::input(file, e))?;
-            let r = ripple_from_psds(&x, &y, p, &RippleOptions::default())
-                .map_err(|e| CliError::input(file, e))?;
+            // A pitch the map cannot resolve (longer than the field, or f0 beyond Nyquist) is
+            // not a failed map: the ripple is absent with its reason, as `psd` reports it.
+            let (key, value) = match ripple_from_psds(&x, &y, p, &RippleOptions::default()) {
+                Ok(r) => (
+                    "ripple",
+                    serde_json::to_value(&r).map_err(|e| CliError::processing(file, e))?,
+                ),
+                Err(e @ SpectrumError::NotResolvable(_)) => ("ripple_reason", json!(e.to_string())),
+                Err(e) => return Err(CliError::input(file, e)),
+            };
             if let Value::Object(m) = &mut v {
                 m.insert("window".into(), json!(window.name()));
-                m.insert(
-                    "ripple".into(),
-                    serde_json::to_value(&r).map_err(|e| CliError::processing(file, e))?,
-                );
+                m.insert(key.into(), value);
             }
         }
         Ok(v)
