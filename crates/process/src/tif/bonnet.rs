@@ -221,13 +221,87 @@ impl BonnetTif {
             return 0.0;
         }
         let l = self.sin_t * self.lever_mm;
-        let mut s = 0.0;
-        for &(c, sn) in &self.azimuths {
-            let vx = self.cos_t * x + l * c;
-            let vy = self.cos_t * y + l * sn;
-            s += (vx * vx + vy * vy).sqrt();
+        p * self.omega_rad_s * self.cos_t * mean_speed(x, y, l / self.cos_t, &self.azimuths)
+    }
+}
+
+/// Mean over the precession azimuths `(cos phi, sin phi)` of |(x, y) + b (cos phi, sin phi)|:
+/// the in-plane speed per unit of Omega cos theta at (x, y), with b = (R - h) tan theta the
+/// distance from the spot centre to where the spin axis pierces the surface.
+fn mean_speed(x: f64, y: f64, b: f64, azimuths: &[(f64, f64)]) -> f64 {
+    let mut s = 0.0;
+    for &(c, sn) in azimuths {
+        s += (x + b * c).hypot(y + b * sn);
+    }
+    s / azimuths.len() as f64
+}
+
+/// The shape of a precessing-bonnet footprint as a fit sees it: the same Preston product as
+/// [`BonnetTif`] (pressure times the mean sliding speed over equally spaced precession
+/// azimuths), with a continuous pressure exponent (`(1 - r^2/a^2)^gamma`: 0.5 Hertz,
+/// 1 parabolic, 0 uniform) and the azimuths turned by `psi` from the X axis.
+/// `peak` is the rate at the centre (nm/s): the speed is normalised by its value there.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BonnetShape {
+    /// Rate at the centre, nm/s.
+    pub peak: f64,
+    /// Contact radius a, mm.
+    pub a_mm: f64,
+    /// Pressure exponent gamma.
+    pub gamma: f64,
+    /// Lever b = (R - h) tan theta, mm.
+    pub lever_mm: f64,
+    /// Azimuth of the first precession step, rad.
+    pub psi_rad: f64,
+    /// Number of precession steps.
+    pub steps: usize,
+}
+
+impl BonnetShape {
+    /// The shape of a [`BonnetTif`] (exactly: `rate_at_mm` agrees with the model's).
+    pub fn of(m: &BonnetTif) -> BonnetShape {
+        let gamma = match m.p.pressure {
+            PressureProfile::Hertz => 0.5,
+            PressureProfile::Parabolic => 1.0,
+            PressureProfile::Uniform => 0.0,
+        };
+        BonnetShape {
+            peak: m.rate_at_mm(0.0, 0.0),
+            a_mm: m.a_mm,
+            gamma,
+            lever_mm: m.sin_t * m.lever_mm / m.cos_t,
+            psi_rad: 0.0,
+            steps: m.p.precession_steps,
         }
-        p * self.omega_rad_s * s / self.azimuths.len() as f64
+    }
+
+    /// The precession azimuths (cos, sin).
+    pub fn azimuths(&self) -> Vec<(f64, f64)> {
+        (0..self.steps)
+            .map(|k| {
+                let phi = self.psi_rad + 2.0 * std::f64::consts::PI * k as f64 / self.steps as f64;
+                (phi.cos(), phi.sin())
+            })
+            .collect()
+    }
+
+    /// Rate (nm/s) at (x, y) mm from the centre, given the azimuths of [`Self::azimuths`].
+    pub fn rate_with(&self, x: f64, y: f64, azimuths: &[(f64, f64)]) -> f64 {
+        let rho2 = (x * x + y * y) / (self.a_mm * self.a_mm);
+        if rho2 >= 1.0 {
+            return if rho2 == 1.0 && self.gamma == 0.0 {
+                self.peak * mean_speed(x, y, self.lever_mm, azimuths) / self.lever_mm
+            } else {
+                0.0
+            };
+        }
+        let p = if self.gamma == 0.0 {
+            1.0
+        } else {
+            (1.0 - rho2).powf(self.gamma)
+        };
+        let centre = mean_speed(0.0, 0.0, self.lever_mm, azimuths);
+        self.peak * p * mean_speed(x, y, self.lever_mm, azimuths) / centre
     }
 }
 
@@ -338,6 +412,21 @@ mod tests {
             .zip(tt.iter())
             .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
         assert!(asym < 1e-9 * four.peak_rate_nm_per_s());
+    }
+
+    #[test]
+    fn shape_reproduces_the_model() {
+        for pr in [PressureProfile::Hertz, PressureProfile::Parabolic] {
+            let mut p = BonnetTifParams::paper(7.0);
+            p.pressure = pr;
+            let m = BonnetTif::new(&p).unwrap();
+            let s = BonnetShape::of(&m);
+            let az = s.azimuths();
+            for (x, y) in [(0.0, 0.0), (1.3, -0.4), (-3.9, 2.2), (4.8, 0.1), (6.0, 0.0)] {
+                let (a, b) = (m.rate_at_mm(x, y), s.rate_with(x, y, &az));
+                assert!((a - b).abs() < 1e-12 * 7.0, "{pr:?} ({x}, {y}): {a} vs {b}");
+            }
+        }
     }
 
     #[test]

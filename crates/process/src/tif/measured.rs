@@ -26,6 +26,8 @@
 
 use ndarray::Array2;
 
+use super::bonnet::BonnetShape;
+use super::spotfit::{fit_shape, FitStart};
 use super::{RateField, Tif};
 use crate::error::ProcessError;
 use bonnetlab_surface::Surface;
@@ -39,7 +41,30 @@ pub struct SpotOptions {
     pub pixel_mm: Option<(f64, f64)>,
     /// Largest TIF radius kept in mm (`None`: as large as the map allows).
     pub max_radius_mm: Option<f64>,
+    /// How the footprint between the spot's pixels (its rim above all) is reconstructed.
+    pub rim: Rim,
 }
+
+/// How a measured TIF is reconstructed between the spot's pixels.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Rim {
+    /// The precessing-bonnet shape fitted to the spot ([`super::spotfit`]) evaluated exactly,
+    /// plus the measured-minus-fit residual interpolated; the fit's centre is the tool centre.
+    /// Falls back to [`Rim::Interpolate`] when the fit leaves more than
+    /// [`FIT_ACCEPT`] of the footprint's RMS unexplained (a spot the bonnet model does not
+    /// describe).
+    #[default]
+    ModelPlusResidual,
+    /// The fitted shape alone (the residual dropped); for comparisons.
+    ModelOnly,
+    /// The spot's pixels interpolated (band-limited upsampling, then Catmull-Rom), centred on
+    /// the threshold-free removal centroid.
+    Interpolate,
+}
+
+/// Largest residual RMS, as a fraction of the footprint's RMS, for which the fitted bonnet shape
+/// is used (beyond it the model does not describe the spot).
+pub const FIT_ACCEPT: f64 = 0.05;
 
 impl Default for SpotOptions {
     fn default() -> Self {
@@ -47,6 +72,7 @@ impl Default for SpotOptions {
             ring_fraction: 0.1,
             pixel_mm: None,
             max_radius_mm: None,
+            rim: Rim::default(),
         }
     }
 }
@@ -75,6 +101,10 @@ pub struct MeasuredTif {
     centre: (f64, f64),
     /// Beyond this distance from the centre the rate is 0 (mm).
     radius_mm: f64,
+    /// The fitted bonnet shape, centred on the tool centre, when the rim is model-based
+    /// (`rate` then holds the measured-minus-model residual).
+    model: Option<BonnetShape>,
+    azimuths: Vec<(f64, f64)>,
 }
 
 impl MeasuredTif {
@@ -145,7 +175,41 @@ impl MeasuredTif {
                 break;
             }
         }
+        // The bonnet shape fitted over the same disc, when the rim is model-based.
+        let mut model = None;
+        let mut rate = rate;
+        if o.rim != Rim::Interpolate {
+            let window = (1.3 * support + 2.0 * dx.max(dy)).min(room(u0, v0));
+            let (ci, cj) = (u0.round() as usize, v0.round() as usize);
+            let start = FitStart {
+                centre: (u0, v0),
+                peak: rate[(ci.min(rows - 1), cj.min(cols - 1))].max(0.5 * peak / dwell_s),
+                a_mm: support,
+            };
+            if let Some(f) = fit_shape(&rate, valid, dx, dy, start, window, 4) {
+                if f.residual_rms <= FIT_ACCEPT * f.data_rms {
+                    (u0, v0) = f.centre;
+                    let az = f.shape.azimuths();
+                    if o.rim == Rim::ModelPlusResidual {
+                        rate = Array2::from_shape_fn((rows, cols), |(i, j)| {
+                            rate[(i, j)]
+                                - f.shape.rate_with(
+                                    (j as f64 - v0) * dx,
+                                    (i as f64 - u0) * dy,
+                                    &az,
+                                )
+                        });
+                    } else {
+                        rate.fill(0.0);
+                    }
+                    model = Some(f.shape);
+                }
+            }
+        }
         let mut radius = (1.1 * support + dx.max(dy)).min(room(u0, v0));
+        if let Some(m) = &model {
+            radius = radius.max(m.a_mm);
+        }
         if let Some(m) = o.max_radius_mm {
             radius = radius.min(m);
         }
@@ -184,6 +248,8 @@ impl MeasuredTif {
             dy_mm: dy / f,
             centre: ((u0 - (ci - h0) as f64) * f, (v0 - (cj - h1) as f64) * f),
             radius_mm: radius,
+            azimuths: model.as_ref().map(|m| m.azimuths()).unwrap_or_default(),
+            model,
         })
     }
 
@@ -196,6 +262,11 @@ impl MeasuredTif {
     pub fn radius_mm(&self) -> f64 {
         self.radius_mm
     }
+
+    /// The fitted bonnet shape, when the rim is model-based.
+    pub fn model(&self) -> Option<&BonnetShape> {
+        self.model.as_ref()
+    }
 }
 
 impl RateField for MeasuredTif {
@@ -205,7 +276,11 @@ impl RateField for MeasuredTif {
         }
         let u = self.centre.0 + dy_mm / self.dy_mm;
         let v = self.centre.1 + dx_mm / self.dx_mm;
-        crate::interp::catmull_rom(&self.rate, u, v)
+        let fitted = self
+            .model
+            .as_ref()
+            .map_or(0.0, |m| m.rate_with(dx_mm, dy_mm, &self.azimuths));
+        fitted + crate::interp::catmull_rom(&self.rate, u, v)
     }
 
     fn half_extent_mm(&self) -> (f64, f64) {

@@ -14,6 +14,7 @@ pub mod derived;
 pub mod gaussian;
 pub mod measured;
 pub mod motion;
+pub mod spotfit;
 
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
