@@ -24,10 +24,14 @@ use std::sync::Arc;
 use bonnetlab_process::channels::Channels;
 use bonnetlab_process::path::PathLog;
 use bonnetlab_process::recipe::TifSource;
+use bonnetlab_process::removal::{deposit_exact, ExactOptions};
 use bonnetlab_process::simulate::{removal, Mode, ToolModel};
 use bonnetlab_process::tif::bonnet::BonnetTif;
 use bonnetlab_process::tif::derived::Channel;
-use bonnetlab_process::tif::{BonnetTifParams, GaussianTif, PressureProfile, RateField, RateScale};
+use bonnetlab_process::tif::measured::{MeasuredTif, Rim, SpotOptions as MeasuredSpotOptions};
+use bonnetlab_process::tif::{
+    BonnetTifParams, GaussianTif, PressureProfile, RateField, RateScale, Tif,
+};
 use bonnetlab_process::Grid;
 use bonnetlab_surface::rng::Rng;
 use bonnetlab_surface::Surface;
@@ -251,8 +255,10 @@ fn spot_map(truth: &Truth, spx: f64, offset: (f64, f64), noise_nm: f64, dwell_s:
 
 #[derive(Clone, Copy)]
 struct Spot {
-    /// spot pixel = map pixel / `fineness`
-    fineness: usize,
+    /// spot pixel = map pixel / `fineness` (not necessarily an integer: the spot is then on a
+    /// different pixel from the map's)
+    fineness: f64,
+    /// the spot's centre is (offset, -0.6 offset) mm from its map's centre
     offset_mm: f64,
     noise_nm: f64,
 }
@@ -272,6 +278,47 @@ enum Engine {
     Calibration,
 }
 
+/// Dwell of the measured spots, s.
+const SPOT_DWELL_S: f64 = 20.0;
+
+/// The tool as the CLI builds it: `ToolModel::from_source` on the analytic model, or on a
+/// measured spot of the truth TIF (default spot options).
+fn tool_for(truth: &Truth, px: f64, spot: Option<Spot>) -> ToolModel {
+    match spot {
+        None => match truth {
+            Truth::Gaussian(g) => ToolModel::from_source(&TifSource::Gaussian(*g), None, px, px),
+            Truth::Bonnet(..) => {
+                ToolModel::from_source(&TifSource::Bonnet(bonnet_params()), None, px, px)
+            }
+        },
+        Some(s) => {
+            let map = measured_spot(truth, px, s);
+            let src = TifSource::Spot {
+                path: "spot.dat".into(),
+                dwell_s: SPOT_DWELL_S,
+            };
+            ToolModel::from_source(&src, Some(&map), px, px)
+        }
+    }
+    .unwrap()
+}
+
+fn measured_spot(truth: &Truth, px: f64, s: Spot) -> Surface {
+    let off = (s.offset_mm, -0.6 * s.offset_mm);
+    spot_map(truth, px / s.fineness, off, s.noise_nm, SPOT_DWELL_S)
+}
+
+/// A measured spot's tool with explicit spot options (to compare rim reconstructions).
+fn tool_with_rim(truth: &Truth, px: f64, spot: Spot, rim: Rim) -> ToolModel {
+    let map = measured_spot(truth, px, spot);
+    let o = MeasuredSpotOptions {
+        rim,
+        ..Default::default()
+    };
+    let m = MeasuredTif::from_spot(&map, SPOT_DWELL_S, &o).unwrap();
+    ToolModel::Measured(Tif::sample(&m, px, px).unwrap(), Box::new(m))
+}
+
 fn run_case(
     truth: &Truth,
     pitch: f64,
@@ -281,35 +328,31 @@ fn run_case(
     spot: Option<Spot>,
     engine: Engine,
 ) -> Outcome {
+    let tool = Arc::new(tool_for(truth, px, spot));
+    run_with(&tool, truth, pitch, px, phase, along_x, engine)
+}
+
+fn run_with(
+    tool: &Arc<ToolModel>,
+    truth: &Truth,
+    pitch: f64,
+    px: f64,
+    phase: f64,
+    along_x: bool,
+    engine: Engine,
+) -> Outcome {
     let n = (SIDE_MM / px).round() as usize + 1;
     let grid = Grid::new(n, n, px, px, 0.0, 0.0).unwrap();
     let lines = line_positions(pitch, px, phase, truth.support_mm());
     let path = raster(&lines, along_x, truth.support_mm());
-    let tool = match spot {
-        None => match truth {
-            Truth::Gaussian(g) => ToolModel::from_source(&TifSource::Gaussian(*g), None, px, px),
-            Truth::Bonnet(..) => {
-                ToolModel::from_source(&TifSource::Bonnet(bonnet_params()), None, px, px)
-            }
-        },
-        Some(s) => {
-            let dwell = 20.0;
-            let off = (s.offset_mm, -0.6 * s.offset_mm);
-            let map = spot_map(truth, px / s.fineness as f64, off, s.noise_nm, dwell);
-            let src = TifSource::Spot {
-                path: "spot.dat".into(),
-                dwell_s: dwell,
-            };
-            ToolModel::from_source(&src, Some(&map), px, px)
-        }
-    }
-    .unwrap();
     let model = match engine {
-        Engine::Simulate(mode) => removal(&tool, &path, &grid, None, mode).unwrap(),
-        Engine::Calibration => Channels::new(Arc::new(tool), &grid, 1.0)
-            .unwrap()
-            .removal(Channel::Value, &path.densified(0.5 * px), None)
-            .unwrap(),
+        Engine::Simulate(mode) => removal(tool, &path, &grid, None, mode).unwrap(),
+        Engine::Calibration => {
+            Channels::new(Arc::clone(tool) as Arc<dyn RateField + Send>, &grid, 1.0)
+                .unwrap()
+                .removal(Channel::Value, &path.densified(0.5 * px), None)
+                .unwrap()
+        }
     };
     let pos: Vec<f64> = (0..n).map(|i| i as f64 * px).collect();
     let reference = reference_profile(truth, &lines, &pos, along_x, 400);
@@ -408,62 +451,169 @@ fn analytic_tifs_fast_mode_matches_exact_deposition() {
     assert!(worst.1 < 0.01, "sigma1 error {:.2} %", 100.0 * worst.1);
 }
 
+/// The issue's tolerances for a measured spot: sigma_1 within 1 % when the spot is measured at
+/// a quarter of the map pixel or finer, within 2 % otherwise; removal RMS within 0.5 %.
+fn spot_tolerances(truth: &Truth, pitch: f64, fineness: f64) -> (f64, f64) {
+    let s1: f64 = if fineness >= 4.0 { 0.01 } else { 0.02 };
+    // A Gaussian spot is not a bonnet: its fit is rejected and its pixels interpolated, with
+    // the support cut at 0.5 % of the peak (3.3 sigma). At the 1.3 mm pitch the ripple is
+    // 0.04 nm and that cut moves it by up to 1.2 %.
+    let s1 = match truth {
+        Truth::Gaussian(_) if pitch < 1.5 => s1.max(0.015),
+        _ => s1,
+    };
+    // A spot coarser than the map (not a case the issue sets a figure for): the 0.6 mm sigma
+    // Gaussian at 0.65 mm pixels is sampled at about one pixel per sigma, and its removal RMS
+    // misses by up to 0.9 % (sigma_1 stays within 0.9 %). Held to what is measured.
+    let rms = match truth {
+        Truth::Gaussian(_) if fineness < 1.0 => 0.01,
+        _ => 0.005,
+    };
+    (rms, s1)
+}
+
 #[test]
 fn measured_spots_fast_mode_matches_exact_deposition() {
     let mut rows = Vec::new();
     let mut fails = Vec::new();
+    let mut worst = [(0.0f64, 0.0f64); 2];
     for truth in [Truth::gaussian(), Truth::bonnet()] {
-        for (pitch, px) in [(1.7, 0.25), (2.7, 0.5), (3.0, 0.5), (1.3, 0.1)] {
-            for fineness in [1usize, 4] {
-                for (offset_mm, engine) in [
-                    (0.0, Engine::Simulate(Mode::Fast)),
-                    (0.25, Engine::Simulate(Mode::Fast)),
-                    (0.8, Engine::Simulate(Mode::Fast)),
-                    (0.8, Engine::Calibration),
-                ] {
+        for (pitch, px) in [(1.7, 0.25), (2.7, 0.5), (3.0, 0.5), (1.3, 0.1), (3.0, 0.3)] {
+            // At the map pixel, on a different pixel (0.6 and 1.3 map pixels: between the
+            // spot's pixels and the map's there is no integer ratio), at a quarter of it.
+            for fineness in [1.0, 1.0 / 0.6, 1.0 / 1.3, 4.0] {
+                for offset_mm in [0.0, 0.25, 0.8] {
                     let spot = Spot {
                         fineness,
                         offset_mm,
                         noise_nm: 0.1,
                     };
-                    let o = run_case(&truth, pitch, px, 0.37, true, Some(spot), engine);
-                    let label = format!(
-                        "{} spot px/{fineness} off {offset_mm} pitch {pitch} px {px}{}",
-                        truth.name(),
-                        if engine == Engine::Calibration {
-                            " calib"
-                        } else {
-                            ""
-                        }
-                    );
-                    // The issue's tolerances: sigma1 within 1 % for a spot at a quarter of the
-                    // map pixel, 2 % at the map pixel. Not yet met for the Hertz bonnet, whose
-                    // square-root rim the spot's pixels cannot resolve (issue 14 open: a rim
-                    // reconstructed by a model fit is the next step); those cases are held to
-                    // the errors measured now, so they cannot get worse unnoticed.
-                    // The spot's support is cut at 0.5 % of the peak, 3.6 sigma for a Gaussian:
-                    // at the 1.3 mm pitch that moves a ripple of 0.04 nm by 1.2 %.
-                    let s1_tol = match (&truth, fineness >= 4) {
-                        (Truth::Gaussian(_), true) if pitch < 1.5 => 0.015,
-                        (Truth::Gaussian(_), true) => 0.01,
-                        (Truth::Gaussian(_), false) => 0.02,
-                        (Truth::Bonnet(..), true) => 0.015,
-                        (Truth::Bonnet(..), false) => 0.17,
-                    };
-                    let rms_tol = match (&truth, fineness >= 4) {
-                        (Truth::Bonnet(..), false) => 0.025,
-                        _ => 0.005,
-                    };
-                    if o.rms_err > rms_tol || o.s1_err.abs() > s1_tol {
-                        fails.push(label.clone());
+                    let tool = Arc::new(tool_for(&truth, px, Some(spot)));
+                    let mut runs = vec![
+                        (0.37, true, Engine::Simulate(Mode::Fast)),
+                        (0.0, false, Engine::Simulate(Mode::Fast)),
+                    ];
+                    if offset_mm == 0.8 {
+                        runs.push((0.37, true, Engine::Calibration));
                     }
-                    rows.push(table_row(&label, &o));
+                    for (phase, along_x, engine) in runs {
+                        let o = run_with(&tool, &truth, pitch, px, phase, along_x, engine);
+                        let label = format!(
+                            "{} spot px {:.3} off {offset_mm} pitch {pitch} px {px} {} phase {phase}{}",
+                            truth.name(),
+                            px / fineness,
+                            if along_x { "X" } else { "Y" },
+                            if engine == Engine::Calibration {
+                                " calib"
+                            } else {
+                                ""
+                            }
+                        );
+                        let (rms_tol, s1_tol) = spot_tolerances(&truth, pitch, fineness);
+                        if o.rms_err > rms_tol || o.s1_err.abs() > s1_tol {
+                            fails.push(label.clone());
+                        }
+                        let w = &mut worst[usize::from(fineness >= 4.0)];
+                        w.0 = w.0.max(o.rms_err);
+                        w.1 = w.1.max(o.s1_err.abs());
+                        rows.push(table_row(&label, &o));
+                    }
                 }
             }
         }
     }
     println!("{}", rows.join("\n"));
+    println!(
+        "worst, spot coarser than a quarter pixel: rms {:.3} %, sigma1 {:.2} %; \
+         a quarter pixel or finer: rms {:.3} %, sigma1 {:.2} %",
+        100.0 * worst[0].0,
+        100.0 * worst[0].1,
+        100.0 * worst[1].0,
+        100.0 * worst[1].1
+    );
     assert!(fails.is_empty(), "outside tolerance: {fails:?}");
+}
+
+/// The rim reconstructions compared on the Hertz bonnet (whose square-root rim pixels cannot
+/// resolve): the model fit plus the interpolated residual (the default), the fit alone, and the
+/// pixels interpolated. The default must be the best of the three at the map pixel.
+#[test]
+fn rim_reconstructions_compared() {
+    let truth = Truth::bonnet();
+    let mut worst = [(0.0f64, 0.0f64); 3];
+    let rims = [Rim::ModelPlusResidual, Rim::ModelOnly, Rim::Interpolate];
+    for (pitch, px) in [(1.7, 0.25), (2.7, 0.5), (3.0, 0.5)] {
+        for fineness in [1.0, 4.0] {
+            for offset_mm in [0.0, 0.8] {
+                let spot = Spot {
+                    fineness,
+                    offset_mm,
+                    noise_nm: 0.5,
+                };
+                for (k, rim) in rims.iter().enumerate() {
+                    let tool = Arc::new(tool_with_rim(&truth, px, spot, *rim));
+                    let o = run_with(
+                        &tool,
+                        &truth,
+                        pitch,
+                        px,
+                        0.37,
+                        true,
+                        Engine::Simulate(Mode::Fast),
+                    );
+                    let label =
+                        format!("{rim:?} spot px/{fineness} off {offset_mm} pitch {pitch} px {px}");
+                    println!("{}", table_row(&label, &o));
+                    if fineness == 1.0 {
+                        worst[k].0 = worst[k].0.max(o.rms_err);
+                        worst[k].1 = worst[k].1.max(o.s1_err.abs());
+                    }
+                }
+            }
+        }
+    }
+    for (rim, w) in rims.iter().zip(&worst) {
+        println!(
+            "{rim:?} at the map pixel: worst rms {:.3} %, sigma1 {:.2} %",
+            100.0 * w.0,
+            100.0 * w.1
+        );
+    }
+    assert!(worst[0].1 <= worst[1].1 && worst[0].1 <= worst[2].1);
+    assert!(worst[0].0 <= worst[1].0 && worst[0].0 <= worst[2].0);
+}
+
+/// The exact mode's own sub-steps: halving them changes the removal by less than 0.1 % of its
+/// RMS (the issue's condition on the exact reference), on both analytic TIFs.
+#[test]
+fn exact_mode_substeps_are_converged() {
+    for truth in [Truth::gaussian(), Truth::bonnet()] {
+        let (pitch, px) = (1.7, 0.25);
+        let tool = tool_for(&truth, px, None);
+        let n = (SIDE_MM / px).round() as usize + 1;
+        let grid = Grid::new(n, n, px, px, 0.0, 0.0).unwrap();
+        let lines = line_positions(pitch, px, 0.37, truth.support_mm());
+        let path = raster(&lines, true, truth.support_mm());
+        let (ex, ey) = tool.field().half_extent_mm();
+        let default_step = (0.25 * px).min(ex.min(ey) / 80.0);
+        let run = |step: f64| {
+            let o = ExactOptions {
+                max_step_mm: Some(step),
+                ..Default::default()
+            };
+            deposit_exact(&path, tool.field(), &grid, None, &o).unwrap()
+        };
+        let (a, b) = (run(default_step), run(0.5 * default_step));
+        let d2: f64 = a.iter().zip(b.iter()).map(|(x, y)| (x - y).powi(2)).sum();
+        let r2: f64 = b.iter().map(|y| y * y).sum();
+        let rel = (d2 / r2).sqrt();
+        println!(
+            "{} exact sub-steps halved: {:.4} %",
+            truth.name(),
+            100.0 * rel
+        );
+        assert!(rel < 1e-3, "{}: {rel}", truth.name());
+    }
 }
 
 #[test]

@@ -49,7 +49,8 @@ pub struct SpotOptions {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Rim {
     /// The precessing-bonnet shape fitted to the spot ([`super::spotfit`]) evaluated exactly,
-    /// plus the measured-minus-fit residual interpolated; the fit's centre is the tool centre.
+    /// plus the measured-minus-fit residual interpolated when it stands out of the noise
+    /// ([`RESIDUAL_NOISE_FACTOR`]); the fit's centre is the tool centre.
     /// Falls back to [`Rim::Interpolate`] when the fit leaves more than
     /// [`FIT_ACCEPT`] of the footprint's RMS unexplained (a spot the bonnet model does not
     /// describe).
@@ -65,6 +66,10 @@ pub enum Rim {
 /// Largest residual RMS, as a fraction of the footprint's RMS, for which the fitted bonnet shape
 /// is used (beyond it the model does not describe the spot).
 pub const FIT_ACCEPT: f64 = 0.05;
+
+/// A fit residual whose RMS is within this factor of the border ring's noise RMS is taken as
+/// noise and dropped (interpolating it into the TIF would print the noise into every removal).
+pub const RESIDUAL_NOISE_FACTOR: f64 = 1.5;
 
 impl Default for SpotOptions {
     fn default() -> Self {
@@ -190,14 +195,13 @@ impl MeasuredTif {
                 if f.residual_rms <= FIT_ACCEPT * f.data_rms {
                     (u0, v0) = f.centre;
                     let az = f.shape.azimuths();
-                    if o.rim == Rim::ModelPlusResidual {
+                    // A residual within the measurement noise is noise: the model alone.
+                    let significant = f.residual_rms > RESIDUAL_NOISE_FACTOR * noise;
+                    if o.rim == Rim::ModelPlusResidual && significant {
                         rate = Array2::from_shape_fn((rows, cols), |(i, j)| {
                             rate[(i, j)]
-                                - f.shape.rate_with(
-                                    (j as f64 - v0) * dx,
-                                    (i as f64 - u0) * dy,
-                                    &az,
-                                )
+                                - f.shape
+                                    .rate_with((j as f64 - v0) * dx, (i as f64 - u0) * dy, &az)
                         });
                     } else {
                         rate.fill(0.0);
