@@ -31,6 +31,8 @@ pub struct ShapeFit {
     pub residual_rms: f64,
     /// RMS of the data over the fitted pixels, nm/s.
     pub data_rms: f64,
+    /// Pixels the fit used.
+    pub pixels: usize,
     pub iterations: usize,
 }
 
@@ -124,6 +126,7 @@ pub fn fit_shape(
         centre: (u0 + p[1] / dy, v0 + p[0] / dx),
         residual_rms: (cost / n).sqrt(),
         data_rms,
+        pixels: pts.len(),
         iterations,
     })
 }
