@@ -65,6 +65,8 @@ pub struct MinDwellOptions {
     pub correction_iterations: usize,
     /// Healing iterations on the fine dwell grid at the end (coarse grid only; 0: none).
     pub fine_iterations: usize,
+    /// Coarse-node spline: 1 bilinear (tent), 2 cubic B-spline.
+    pub spline_order: usize,
 }
 
 impl Default for MinDwellOptions {
@@ -78,6 +80,7 @@ impl Default for MinDwellOptions {
             corrections: 2,
             correction_iterations: 100,
             fine_iterations: 0,
+            spline_order: 2,
         }
     }
 }
@@ -146,7 +149,7 @@ impl<'a> MinDwell<'a> {
                 o.coarse_tol,
             )
         };
-        let mut coarse = match CoarseGrid::new(p, s0, s1)? {
+        let mut coarse = match CoarseGrid::new(p, s0, s1, o.spline_order)? {
             Some(grid) => {
                 let conv = grid.problem.convolver();
                 let proj = PistonTilt::new(&grid.problem.aperture);
