@@ -18,12 +18,13 @@
 //! least residual with total dwell <= a budget).
 //!
 //! Optional coarse dwell grid (`max_coarsening > 1`, off by default; [`super::coarse`]): steps
-//! 1-3 run on nodes every `s` fine pixels (bilinear prolongation, exact coarse TIF), then
-//! `corrections` cycles of defect correction (FAS: a linear term makes the coarse gradient the
-//! fine objective's gradient at the current map, then `correction_iterations` coarse passes)
-//! and `fine_iterations` fine passes. On case B at s = 5 it solves a point ~18x faster, with less
-//! total dwell but a residual 2 % above the fine solver's (reports/performance_process.md), so
-//! it is not the default yet.
+//! 1-3 run on nodes every `s` fine pixels (cubic B-spline prolongation by default, exact coarse
+//! TIF, desired removal low-passed below the coarse Nyquist frequency and sampled at the nodes),
+//! then `corrections` cycles of defect correction (FAS: a linear term makes the coarse gradient
+//! the fine objective's gradient at the current map, then `correction_iterations` coarse
+//! passes) and `fine_iterations` fine passes. On case B at s = 5 it solves a point in ~1/20 of
+//! the fine grid's CPU time with less total dwell, but its residual stays 0.4 % above the
+//! target (0.3010 nm; reports/performance_process.md), so it is not the default.
 //!
 //! Tried and dropped (see reports/performance_process.md): a scaled projection with RIFTA's
 //! Fourier preconditioner inside the projected step diverges (a non-diagonal metric with a
@@ -65,7 +66,8 @@ pub struct MinDwellOptions {
     pub correction_iterations: usize,
     /// Healing iterations on the fine dwell grid at the end (coarse grid only; 0: none).
     pub fine_iterations: usize,
-    /// Coarse-node spline: 1 bilinear (tent), 2 cubic B-spline.
+    /// Coarse-node spline: 1 bilinear (tent), 2 cubic B-spline (images of the node lattice
+    /// weaker by about the square of the tent's).
     pub spline_order: usize,
 }
 
@@ -133,6 +135,11 @@ impl<'a> MinDwell<'a> {
         if o.correction_iterations > 100_000 || o.fine_iterations > 100_000 || o.corrections > 100 {
             return Err(ProcessError::invalid(
                 "correction and fine iterations must be at most 100000, corrections at most 100",
+            ));
+        }
+        if !(1..=2).contains(&o.spline_order) {
+            return Err(ProcessError::invalid(
+                "spline_order must be 1 (bilinear) or 2 (cubic)",
             ));
         }
         if !(o.coarse_tol.is_finite() && o.coarse_tol >= 0.0) {
