@@ -1,25 +1,28 @@
 //! A coarse dwell grid for the minimum-dwell solver: the dwell map is parametrised by nodes every
-//! `s` fine pixels and interpolated bilinearly onto the fine dwell grid, where the residual is
-//! always evaluated.
+//! `s` fine pixels and spread onto the fine dwell grid by a B-spline (cubic by default, or the
+//! bilinear tent), where the residual is always evaluated.
 //!
-//! Why it loses nothing: the TIF is a low-pass filter. When its transfer above the coarse
+//! Why it can lose little: the TIF is a low-pass filter. When its transfer above the coarse
 //! grid's Nyquist frequency is below a tolerance (checked on the fine kernel spectrum, per axis),
 //! a dwell map with content above that frequency removes (almost) nothing there, so a map on the
-//! coarse nodes reaches the same residual; the transform shrinks by about `s0 * s1`.
+//! coarse nodes reaches nearly the same residual; the transform shrinks by about `s0 * s1`.
 //!
-//! The model, exact for the interpolated map: node `k` at fine index `pos(k) = s (k - pad)`
-//! spreads its dwell `T_c[k]` (s) over the fine pixels with the tent weights
-//! `w(d) = 1 - |d| / s` (|d| < s) of each axis divided by `s0 s1` (total dwell kept: the tent
-//! sums to `s` per axis). The fine removal at a node is then `sum_k T_c[k] K(pos(m) - pos(k))`,
-//! `K = B * tent / (s0 s1)` (B the fine TIF): the coarse TIF is `K` sampled every `s` pixels.
-//! Nodes whose tent would leave the fine dwell grid (its border, and the padding that keeps the
-//! coarse clear aperture a coarse TIF half-width inside the coarse grid) are held at zero dwell.
+//! The model, exact for the spread map: node `k` at fine index `pos(k) = s (k - pad)` spreads its
+//! dwell `T_c[k]` (s) over the fine pixels with the spline weights `w(d) = beta(d / s)` of each
+//! axis (tent: `1 - |d| / s`, |d| < s; cubic B-spline: |d| < 2 s) divided by `s0 s1` (total
+//! dwell kept: the weights sum to `s` per axis). The fine removal at a node is then
+//! `sum_k T_c[k] K(pos(m) - pos(k))`, `K = B * spline / (s0 s1)` (B the fine TIF): the coarse
+//! TIF is `K` sampled every `s` pixels. Nodes whose spline would leave the fine dwell grid (its
+//! border, and the padding that keeps the coarse clear aperture a coarse TIF half-width inside
+//! the coarse grid) are held at zero dwell. The cubic spline's images of the node lattice are
+//! weaker than the tent's by about the square.
 //!
-//! What the coarse problem approximates: the least squares over coarse nodes instead of fine
-//! pixels, and a tent average of the desired removal instead of its samples. Defect correction
-//! removes both: after a coarse solve, the fine residual (exact, two fine FFTs) is averaged onto
-//! the nodes and the coarse target is reset to `B_c T_c + R r_f`, so the coarse solver's residual
-//! is the fine one; a few coarse healing passes then correct the map.
+//! The coarse problem: the desired removal low-passed below the coarse Nyquist frequency (no
+//! aliased noise), sampled at the nodes less than one node spacing from a fine CA pixel (so
+//! the CA's edge pixels lie between constrained nodes). What it approximates: the least squares
+//! over those nodes instead of the fine CA pixels. Defect correction (optional) feeds the fine
+//! gradient back: after a coarse solve, the fine objective's gradient (exact, fine FFTs) is
+//! restricted to the nodes as a linear term, and a few coarse healing passes correct the map.
 
 use ndarray::Array2;
 
