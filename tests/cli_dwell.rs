@@ -83,6 +83,47 @@ fn case_a_json_and_outputs() {
     );
 }
 
+/// Issue #18: absurd finite numbers in a dwell case (1e300, 1e-300, negative, a huge clear
+/// aperture) are one-line errors naming the file and the key, exit 2.
+#[test]
+fn absurd_case_numbers_are_one_line_errors_naming_file_and_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = "surface = \"s.dat\"\npixel_mm = 0.5\n[tif]\nkind = \"gaussian\"\nsigma_mm = 1.0\ndiameter_mm = 6.0\npeak_rate_nm_per_s = 1.0\n[clear_aperture]\nrows = [10, 20]\ncols = [10, 30]\n";
+    for (i, (from, to, key)) in [
+        (
+            "peak_rate_nm_per_s = 1.0",
+            "peak_rate_nm_per_s = 1e300",
+            "peak_rate_nm_per_s",
+        ),
+        (
+            "peak_rate_nm_per_s = 1.0",
+            "peak_rate_nm_per_s = 1e-300",
+            "peak_rate_nm_per_s",
+        ),
+        (
+            "peak_rate_nm_per_s = 1.0",
+            "peak_rate_nm_per_s = -1.0",
+            "peak_rate_nm_per_s",
+        ),
+        ("sigma_mm = 1.0", "sigma_mm = 1e300", "sigma_mm"),
+        ("cols = [10, 30]", "cols = [10, 4000000000000]", "cols"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let p = dir.path().join(format!("absurd{i}.toml"));
+        std::fs::write(&p, good.replace(from, to)).unwrap();
+        let o = bin().arg("dwell").arg(&p).output().unwrap();
+        assert_eq!(o.status.code(), Some(2), "{to}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains(&format!("absurd{i}.toml")) && err.contains(key),
+            "{to}: {err}"
+        );
+        assert_eq!(err.trim().lines().count(), 1, "{to}: {err}");
+    }
+}
+
 #[test]
 fn bad_case_is_a_one_line_error_with_exit_2() {
     let dir = tempfile::tempdir().unwrap();

@@ -256,3 +256,35 @@ fn realised_feed_matches_exact_deposition_of_the_schedule() {
         );
     }
 }
+
+/// The optional coarse dwell grid (cubic B-spline nodes every 5 pixels) on case B: a
+/// non-negative map on the fine grid whose figures are the public evaluation of that map, within
+/// the 66 min budget and within 0.5 % of the fine solver's residual (0.2997 nm). It does not reach
+/// the 0.30 nm target (0.3009 nm measured), which is why it is not the default; this guards what it
+/// does reach (the bilinear grid with tent-averaged targets gave 0.306 nm).
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
+fn coarse_grid_on_case_b_stays_near_the_fine_residual() {
+    let (_, p) = load("ibfest_case_b.toml");
+    let o = MinDwellOptions {
+        iterations: 600,
+        max_coarsening: 5,
+        corrections: 0,
+        ..MinDwellOptions::default()
+    };
+    let mut md = MinDwell::new(&p.problem, &o).unwrap();
+    assert_eq!(md.coarsening(), (5, 5));
+    let (s, _) = md.pick(DwellTarget::MaxDwell { s: 66.0 * 60.0 }).unwrap();
+    assert!(s.dwell_s.iter().all(|&v| v >= 0.0));
+    let e = p.problem.evaluate(&s.dwell_s).unwrap();
+    assert!((e.residual_rms_nm - s.residual_rms_nm).abs() < 1e-12);
+    let min = s.total_dwell_s / 60.0;
+    assert!(
+        min <= 66.0 && s.residual_rms_nm <= 0.2997 * 1.005,
+        "{} nm with {min} min",
+        s.residual_rms_nm
+    );
+}

@@ -111,18 +111,25 @@ impl DwellCase {
         };
         let doc: CaseDoc = crate::config::from_toml(text).map_err(|e| err(&e.key, e.what))?;
         let num = |v: Option<f64>, name: &str| -> Result<f64, ProcessError> {
+            let (lo, hi) = plausible(name);
             match v {
-                Some(f) if f.is_finite() && f > 0.0 => Ok(f),
+                Some(f) if f.is_finite() && f > 0.0 && (lo..=hi).contains(&f) => Ok(f),
+                Some(f) if f.is_finite() && f > 0.0 => Err(err(
+                    name,
+                    format!("{f} is outside the plausible range {lo:e} ..= {hi:e}"),
+                )),
                 Some(_) => Err(err(name, "must be a positive number".into())),
                 None => Err(err(name, "missing".into())),
             }
         };
         let range = |v: Option<[i64; 2]>, name: &str| -> Result<(usize, usize), ProcessError> {
             match v {
-                Some([x, y]) if x >= 0 && y > x => Ok((x as usize, y as usize)),
+                Some([x, y]) if x >= 0 && y > x && y <= MAX_PIXELS as i64 => {
+                    Ok((x as usize, y as usize))
+                }
                 _ => Err(err(
                     name,
-                    "must be [start, end) with 0 <= start < end integers".into(),
+                    format!("must be [start, end) with 0 <= start < end <= {MAX_PIXELS} integers"),
                 )),
             }
         };
@@ -150,6 +157,18 @@ impl DwellCase {
             num(tif_t.peak_rate_nm_per_s, "[tif] peak_rate_nm_per_s")?,
         )
         .map_err(|e| err("[tif]", e.to_string()))?;
+        // The sampled TIF is diameter / pixel_mm pixels wide: bound it before anything is
+        // allocated.
+        let across = tif.diameter_mm / pixel_mm;
+        if across > MAX_TIF_PIXELS {
+            return Err(err(
+                "[tif] diameter_mm",
+                format!(
+                    "{} mm is {across:.3e} pixels of {pixel_mm} mm (at most {MAX_TIF_PIXELS})",
+                    tif.diameter_mm
+                ),
+            ));
+        }
         let ca = doc
             .clear_aperture
             .as_ref()
@@ -237,6 +256,26 @@ impl DwellCase {
     }
 }
 
+/// Largest clear-aperture row / column index (end exclusive) a case may name.
+const MAX_PIXELS: usize = 1_000_000;
+
+/// Largest sampled TIF width (pixels across its disc).
+const MAX_TIF_PIXELS: f64 = 4001.0;
+
+/// The plausible range of a positive case number (units of its key): far wider than any lab
+/// uses, narrow enough that a typo in an exponent (1e300, 1e-300) is caught by name.
+fn plausible(key: &str) -> (f64, f64) {
+    match key {
+        "pixel_mm" => (1e-6, 1e3),
+        "[tif] sigma_mm" | "[tif] diameter_mm" => (1e-6, 1e4),
+        "[tif] peak_rate_nm_per_s" => (1e-9, 1e9),
+        "[machine] v_min_mm_per_s" | "[machine] v_max_mm_per_s" => (1e-9, 1e6),
+        "[machine] a_max_mm_per_s2" => (1e-9, 1e9),
+        "[machine] stop_angle_deg" => (1e-9, 180.0),
+        _ => (f64::MIN_POSITIVE, f64::MAX),
+    }
+}
+
 /// The `[machine]` limits (defaults for absent keys), checked.
 fn machine_limits(
     m: Option<&CaseMachine>,
@@ -252,9 +291,17 @@ fn machine_limits(
         ("a_max_mm_per_s2", m.a_max_mm_per_s2, &mut l.a_max_mm_per_s2),
         ("stop_angle_deg", m.stop_angle_deg, &mut l.stop_angle_deg),
     ] {
+        let name = format!("[machine] {key}");
+        let (lo, hi) = plausible(&name);
         match v {
             None => {}
-            Some(f) if f.is_finite() && f > 0.0 => *slot = f,
+            Some(f) if f.is_finite() && f > 0.0 && (lo..=hi).contains(&f) => *slot = f,
+            Some(f) if f.is_finite() && f > 0.0 => {
+                return Err(err(
+                    &name,
+                    format!("{f} is outside the plausible range {lo:e} ..= {hi:e}"),
+                ))
+            }
             Some(_) => {
                 return Err(err(
                     &format!("[machine] {key}"),
@@ -305,6 +352,51 @@ mod tests {
         assert!(e.contains("pixle_mm") && e.contains("`pixel_mm`"), "{e}");
         let c = parse(&format!("{GOOD}[machine]\nv_max_mm_per_s = 20\n")).unwrap();
         assert_eq!(c.limits.v_max_mm_per_s, 20.0);
+    }
+
+    /// Absurd finite numbers (issue #18) are errors naming the key, before anything is sized
+    /// from them.
+    #[test]
+    fn absurd_numbers_name_the_key() {
+        for (from, to, key) in [
+            (
+                "peak_rate_nm_per_s = 1.0",
+                "peak_rate_nm_per_s = 1e300",
+                "[tif] peak_rate_nm_per_s",
+            ),
+            (
+                "peak_rate_nm_per_s = 1.0",
+                "peak_rate_nm_per_s = 1e-300",
+                "[tif] peak_rate_nm_per_s",
+            ),
+            (
+                "peak_rate_nm_per_s = 1.0",
+                "peak_rate_nm_per_s = -2.0",
+                "[tif] peak_rate_nm_per_s",
+            ),
+            ("pixel_mm = 0.5", "pixel_mm = 1e300", "pixel_mm"),
+            ("sigma_mm = 1.0", "sigma_mm = 1e-300", "[tif] sigma_mm"),
+            (
+                "diameter_mm = 6.0",
+                "diameter_mm = 9000.0",
+                "[tif] diameter_mm",
+            ),
+            (
+                "rows = [10, 20]",
+                "rows = [10, 9000000000000]",
+                "[clear_aperture] rows",
+            ),
+        ] {
+            let e = parse(&GOOD.replace(from, to)).unwrap_err().to_string();
+            assert!(e.starts_with(&format!("case.toml: {key}: ")), "{to}: {e}");
+            assert!(!e.contains('\n'));
+        }
+        let e = parse(&format!("{GOOD}[machine]\na_max_mm_per_s2 = 1e300\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("[machine] a_max_mm_per_s2"), "{e}");
+        // Ordinary lab values stay accepted.
+        assert!(parse(&format!("{GOOD}[machine]\nv_max_mm_per_s = 500\n")).is_ok());
     }
 
     #[test]

@@ -18,12 +18,13 @@
 //! least residual with total dwell <= a budget).
 //!
 //! Optional coarse dwell grid (`max_coarsening > 1`, off by default; [`super::coarse`]): steps
-//! 1-3 run on nodes every `s` fine pixels (bilinear prolongation, exact coarse TIF), then
-//! `corrections` cycles of defect correction (FAS: a linear term makes the coarse gradient the
-//! fine objective's gradient at the current map, then `correction_iterations` coarse passes)
-//! and `fine_iterations` fine passes. On case B at s = 5 it solves a point ~18x faster, with less
-//! total dwell but a residual 2 % above the fine solver's (reports/performance_process.md), so
-//! it is not the default yet.
+//! 1-3 run on nodes every `s` fine pixels (cubic B-spline prolongation by default, exact coarse
+//! TIF, desired removal low-passed below the coarse Nyquist frequency and sampled at the nodes),
+//! then `corrections` cycles of defect correction (FAS: a linear term makes the coarse gradient
+//! the fine objective's gradient at the current map, then `correction_iterations` coarse
+//! passes) and `fine_iterations` fine passes. On case B at s = 5 it solves a point in ~1/20 of
+//! the fine grid's CPU time with less total dwell, but its residual stays 0.4 % above the
+//! target (0.3010 nm; reports/performance_process.md), so it is not the default.
 //!
 //! Tried and dropped (see reports/performance_process.md): a scaled projection with RIFTA's
 //! Fourier preconditioner inside the projected step diverges (a non-diagonal metric with a
@@ -65,6 +66,9 @@ pub struct MinDwellOptions {
     pub correction_iterations: usize,
     /// Healing iterations on the fine dwell grid at the end (coarse grid only; 0: none).
     pub fine_iterations: usize,
+    /// Coarse-node spline: 1 bilinear (tent), 2 cubic B-spline (images of the node lattice
+    /// weaker by about the square of the tent's).
+    pub spline_order: usize,
 }
 
 impl Default for MinDwellOptions {
@@ -78,6 +82,7 @@ impl Default for MinDwellOptions {
             corrections: 2,
             correction_iterations: 100,
             fine_iterations: 0,
+            spline_order: 2,
         }
     }
 }
@@ -132,6 +137,11 @@ impl<'a> MinDwell<'a> {
                 "correction and fine iterations must be at most 100000, corrections at most 100",
             ));
         }
+        if !(1..=2).contains(&o.spline_order) {
+            return Err(ProcessError::invalid(
+                "spline_order must be 1 (bilinear) or 2 (cubic)",
+            ));
+        }
         if !(o.coarse_tol.is_finite() && o.coarse_tol >= 0.0) {
             return Err(ProcessError::invalid("coarse_tol must be >= 0"));
         }
@@ -146,7 +156,7 @@ impl<'a> MinDwell<'a> {
                 o.coarse_tol,
             )
         };
-        let mut coarse = match CoarseGrid::new(p, s0, s1)? {
+        let mut coarse = match CoarseGrid::new(p, s0, s1, o.spline_order)? {
             Some(grid) => {
                 let conv = grid.problem.convolver();
                 let proj = PistonTilt::new(&grid.problem.aperture);
