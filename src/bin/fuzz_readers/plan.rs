@@ -17,8 +17,8 @@
 //! accepted input predicted over [`BUDGET_BYTES`] is a finding (`BUDGET:` error).
 //!
 //! The TIF sampling runs for real, so its time and heap are measured like every input's,
-//! except that a footprint of more than [`LARGE_PIXELS`] (up to the 2001 x 2001 pixels
-//! `from_source` allows, 1 to 2 s to sample) is sampled for real only the first
+//! except that a footprint of more than [`LARGE_PIXELS`] (up to the 1001 x 1001 pixels
+//! `from_source` allows, about 0.3 s to sample) is sampled for real only the first
 //! [`LARGE_SAMPLED`] times in a run; later ones pass the same size check
 //! (`simulate::check_footprint`, which `from_source` applies first) and are counted in
 //! [`LARGE_TIFS`], so a million inputs stay within minutes.
