@@ -56,7 +56,9 @@ pub fn check_footprint(field: &dyn RateField, dx_mm: f64, dy_mm: f64) -> Result<
         2.0 * (ex / dx_mm + 1e-9).floor() + 1.0,
         2.0 * (ey / dy_mm + 1e-9).floor() + 1.0,
     );
-    if !(w * h <= MAX_TIF_PIXELS) {
+    // NaN (a non-finite extent) fails this test too.
+    let fits = w * h <= MAX_TIF_PIXELS;
+    if !fits {
         return Err(ProcessError::invalid(format!(
             "the TIF footprint ({} x {} mm) covers {} x {} pixels of the map ({} x {} mm), \
              over the limit of 1001 x 1001 pixels: check the spot map's pixel size or the \
