@@ -209,7 +209,7 @@ impl Reader {
     fn run(self, bytes: &[u8]) -> Result<(), String> {
         // The CLI reads a recipe, case or manifest only up to this size (`input::read_text`).
         if matches!(self, Reader::RecipeX | Reader::ManifestX | Reader::DwellX)
-            && bytes.len() as u64 > bonnetlab_io::input::TEXT_LIMIT as u64
+            && bytes.len() as u64 > bonnetlab_io::input::TEXT_LIMIT
         {
             return Err(format!(
                 "input of {} bytes: over the text limit",
