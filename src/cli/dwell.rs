@@ -259,6 +259,9 @@ fn reference_points(reference: Option<&serde_json::Value>) -> Vec<report::dwell_
         .collect()
 }
 
+/// Writes the `--out` files as one set (`report::write::Set`): all are staged under the
+/// directory's lock and published together, so a failure part-way leaves the directory as it
+/// was and two runs never mix their files.
 fn write_outputs(dir: &Path, solved: &SolvedCase) -> Result<(), CliError> {
     let (sol, aperture, offset, pixel_mm) = (
         &solved.solution,
@@ -266,8 +269,7 @@ fn write_outputs(dir: &Path, solved: &SolvedCase) -> Result<(), CliError> {
         solved.offset,
         solved.pixel_mm,
     );
-    std::fs::create_dir_all(dir)
-        .map_err(|e| CliError::input(dir, format!("cannot create the output directory: {e}")))?;
+    let werr = |e: report::write::WriteError| CliError::input(&e.file, e.what);
     let on_grid = |a: &ndarray::Array2<f64>,
                    mask: Option<&ndarray::Array2<bool>>|
      -> Result<Surface, CliError> {
@@ -280,32 +282,44 @@ fn write_outputs(dir: &Path, solved: &SolvedCase) -> Result<(), CliError> {
     };
     let dwell = on_grid(&sol.dwell_s, None)?;
     let residual = on_grid(&sol.residual_nm, Some(aperture))?;
-    let w = |p: PathBuf, s: &Surface, f: MapFormat| {
-        bonnetlab_io::write_surface(&p, s, f).map_err(|e| CliError {
-            code: e.exit_code(),
-            message: e.to_string(),
-        })
-    };
-    w(dir.join("dwell_s.csv"), &dwell, MapFormat::Csv)?;
-    w(dir.join("residual.dat"), &residual, MapFormat::MetroProDat)?;
-    let png = |name: &str, s: &Surface, title: &str, unit: &str| -> Result<(), CliError> {
-        let bytes = report::maps::false_colour_png(s, title, unit)
-            .map_err(|e| CliError::processing(dir.join(name), e.what))?;
-        report::write::bytes(&dir.join(name), &bytes).map_err(|e| CliError::input(&e.file, e.what))
-    };
-    png("dwell_map.png", &dwell, "dwell map (s per pixel)", "s")?;
     let realised = on_grid(&solved.feed.residual_nm, Some(aperture))?;
-    w(
-        dir.join("realised_residual.dat"),
+    let binding = on_grid(&solved.feed.binding.mapv(f64::from), None)?;
+    let mut set = report::write::Set::begin(dir).map_err(werr)?;
+    let map = |set: &mut report::write::Set, name: &str, s: &Surface, f: MapFormat| {
+        let bytes = bonnetlab_io::encode_surface(s, f)
+            .map_err(|e| CliError::processing(dir.join(name), e))?;
+        set.bytes(name, &bytes).map_err(werr)
+    };
+    map(&mut set, "dwell_s.csv", &dwell, MapFormat::Csv)?;
+    map(&mut set, "residual.dat", &residual, MapFormat::MetroProDat)?;
+    map(
+        &mut set,
+        "realised_residual.dat",
         &realised,
         MapFormat::MetroProDat,
     )?;
-    let binding = on_grid(&solved.feed.binding.mapv(f64::from), None)?;
-    w(dir.join("feed_binding.csv"), &binding, MapFormat::Csv)?;
+    map(&mut set, "feed_binding.csv", &binding, MapFormat::Csv)?;
+    let png = |set: &mut report::write::Set,
+               name: &str,
+               s: &Surface,
+               title: &str,
+               unit: &str|
+     -> Result<(), CliError> {
+        let bytes = report::maps::false_colour_png(s, title, unit)
+            .map_err(|e| CliError::processing(dir.join(name), e.what))?;
+        set.bytes(name, &bytes).map_err(werr)
+    };
+    png(
+        &mut set,
+        "dwell_map.png",
+        &dwell,
+        "dwell map (s per pixel)",
+        "s",
+    )?;
     let (header, cols) = report::dwell_report::trade_off_columns(&solved.report.trade_off);
     let cols: Vec<&[f64]> = cols.iter().map(|c| c.as_slice()).collect();
-    report::write::csv_columns(&dir.join("trade_off.csv"), &header, &cols)
-        .map_err(|e| CliError::input(&e.file, e.what))?;
+    set.csv_columns("trade_off.csv", &header, &cols)
+        .map_err(werr)?;
     let chosen = sol.trade_off.first().copied().unwrap_or(TradeOffPoint {
         parameter: 0.0,
         residual_rms_nm: sol.residual_rms_nm,
@@ -314,13 +328,13 @@ fn write_outputs(dir: &Path, solved: &SolvedCase) -> Result<(), CliError> {
     let refs = reference_points(solved.report.reference.as_ref());
     let bytes = report::dwell_report::trade_off_png(&solved.report.trade_off, &chosen, &refs)
         .map_err(|e| CliError::processing(dir.join("trade_off.png"), e.what))?;
-    report::write::bytes(&dir.join("trade_off.png"), &bytes)
-        .map_err(|e| CliError::input(&e.file, e.what))?;
+    set.bytes("trade_off.png", &bytes).map_err(werr)?;
     png(
+        &mut set,
         "residual.png",
         &residual,
         "residual in the clear aperture (piston, tilt removed)",
         "nm",
     )?;
-    Ok(())
+    set.commit().map_err(werr)
 }

@@ -13,6 +13,7 @@
 //! including ring-down after the reversals of the recipe's path log when it has one).
 
 use super::CliError;
+use crate::report;
 use crate::report::format::fixed;
 use crate::report::plot::{LinePlot, Series};
 use bonnetlab_process::recipe::RecipeDoc;
@@ -148,6 +149,25 @@ pub fn run(args: &Args) -> Result<(), CliError> {
 
     let outs: Vec<BonnetOut> = bonnets.iter().map(|&b| bonnet_out(&params, b)).collect();
 
+    if let Some(dir) = &args.out {
+        // Written before the JSON or summary, so a failure here emits nothing. Everything is
+        // computed first, then the files are published as one set
+        // (`report::write::Set`): a failure part-way leaves the directory as it was, and two
+        // runs into one directory never mix their files.
+        let pulses = path_pulses(&doc, args.recipe.as_deref(), &params, args.duration_s)?;
+        let mut set = report::write::Set::begin(dir).map_err(werr)?;
+        write_plots(&params, &mut set)?;
+        write_timeseries(
+            &params,
+            bonnets[0],
+            &mut set,
+            args.duration_s,
+            pulses,
+            args.seed,
+        )?;
+        set.commit().map_err(werr)?;
+    }
+
     if let Some(json_path) = &args.json {
         let text = if outs.len() == 1 {
             serde_json::to_string_pretty(&outs[0])
@@ -158,14 +178,6 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         super::emit(json_path, format!("{text}\n").as_bytes())?;
     } else {
         super::write_stdout(summary(&params, &outs).as_bytes())?;
-    }
-
-    if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| CliError::input(dir, format!("cannot create directory: {e}")))?;
-        write_plots(&params, dir)?;
-        let pulses = path_pulses(&doc, args.recipe.as_deref(), &params, args.duration_s)?;
-        write_timeseries(&params, bonnets[0], dir, args.duration_s, pulses, args.seed)?;
     }
     Ok(())
 }
@@ -225,7 +237,7 @@ fn summary(p: &VibrationParams, outs: &[BonnetOut]) -> String {
     s
 }
 
-fn write_plots(p: &VibrationParams, dir: &Path) -> Result<(), CliError> {
+fn write_plots(p: &VibrationParams, set: &mut report::write::Set) -> Result<(), CliError> {
     let curves: Vec<Vec<FrfPoint>> = Bonnet::ALL
         .iter()
         .map(|&b| spindle_band_frf(p, b))
@@ -262,11 +274,16 @@ fn write_plots(p: &VibrationParams, dir: &Path) -> Result<(), CliError> {
         for m in MODES.iter() {
             plot = plot.marker(m.best_hz(), format!("mode {}", m.order));
         }
-        let stem = dir.join(format!("frf_x{}", dof + 1));
-        let svg = plot.to_svg().map_err(|e| CliError::processing(&stem, e))?;
-        write_atomic(&stem.with_extension("svg"), svg.as_bytes())?;
-        let png = plot.to_png().map_err(|e| CliError::processing(&stem, e))?;
-        write_atomic(&stem.with_extension("png"), &png)?;
+        let stem = format!("frf_x{}", dof + 1);
+        let svg = plot
+            .to_svg()
+            .map_err(|e| CliError::processing(set.path(&stem), e))?;
+        set.bytes(&format!("{stem}.svg"), svg.as_bytes())
+            .map_err(werr)?;
+        let png = plot
+            .to_png()
+            .map_err(|e| CliError::processing(set.path(&stem), e))?;
+        set.bytes(&format!("{stem}.png"), &png).map_err(werr)?;
     }
     Ok(())
 }
@@ -301,12 +318,12 @@ fn path_pulses(
 fn write_timeseries(
     p: &VibrationParams,
     bonnet: Bonnet,
-    dir: &Path,
+    set: &mut report::write::Set,
     duration_s: f64,
     pulses: Vec<AccelPulse>,
     seed: u64,
 ) -> Result<(), CliError> {
-    let file = dir.join("timeseries.csv");
+    let file = set.path("timeseries.csv");
     let ts = tool_tip_displacement(
         p,
         bonnet,
@@ -331,11 +348,10 @@ fn write_timeseries(
             ts.offset_change_mm[k]
         );
     }
-    write_atomic(&file, &buf)
+    set.bytes("timeseries.csv", &buf).map_err(werr)
 }
 
-/// Whole-or-nothing file write (bonnetlab_io's temporary file + rename).
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
-    bonnetlab_io::atomic::write_atomic(path, bytes)
-        .map_err(|e| CliError::input(path, format!("cannot write: {e}")))
+/// A write failure of the output set, naming the file (exit 2).
+fn werr(e: report::write::WriteError) -> CliError {
+    CliError::input(&e.file, format!("cannot write: {}", e.what))
 }

@@ -86,6 +86,11 @@ pub fn load_recipe(recipe_path: &Path) -> Result<Problem, PipelineError> {
         )
     })?;
     let after = read(&after_path)?;
+    // The after map's own pixel size is needed too: an unknown one is the after map's fault,
+    // named here (Problem::new would report it against the recipe).
+    after
+        .pixel_mm("calibration")
+        .map_err(|e| PipelineError::input(&after_path, e))?;
     let (spot, spot_file) = match &recipe.tif {
         TifSource::Spot { path, .. } => (Some(read(path)?), path.clone()),
         _ => (None, recipe_path.to_path_buf()),

@@ -29,6 +29,46 @@ impl std::fmt::Display for ConfigError {
 
 impl std::error::Error for ConfigError {}
 
+/// Longest run of non-blank characters a message echoes whole (a key or value of a million
+/// characters is cut to its start and its length, so the message stays one readable line).
+const MAX_ECHOED_CHARS: usize = 64;
+/// Characters of an unknown name compared with the valid ones (the comparison costs the
+/// name's length times the candidates' squared: a million-character key took seconds).
+const MAX_COMPARED_CHARS: usize = 64;
+
+impl ConfigError {
+    /// The error with every over-long word of its key and message cut (see
+    /// [`MAX_ECHOED_CHARS`]).
+    fn shortened(self) -> ConfigError {
+        ConfigError {
+            key: shorten(&self.key),
+            what: shorten(&self.what),
+        }
+    }
+}
+
+/// `s` with each run of non-blank characters longer than [`MAX_ECHOED_CHARS`] cut to its
+/// first 40 characters and its length: `"xxxx...` -> `"xxxx…(1000002 characters)`.
+fn shorten(s: &str) -> String {
+    if s.len() <= MAX_ECHOED_CHARS {
+        return s.to_string();
+    }
+    let mut out = String::with_capacity(s.len().min(1024));
+    for (i, word) in s.split(' ').enumerate() {
+        if i > 0 {
+            out.push(' ');
+        }
+        let n = word.chars().count();
+        if n > MAX_ECHOED_CHARS {
+            out.extend(word.chars().take(40));
+            out.push_str(&format!("…({n} characters)"));
+        } else {
+            out.push_str(word);
+        }
+    }
+    out
+}
+
 /// Levenshtein edit distance (insertions, deletions, substitutions), by characters.
 pub fn edit_distance(a: &str, b: &str) -> usize {
     let b: Vec<char> = b.chars().collect();
@@ -50,6 +90,8 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
 /// (`pich` for `pitch_mm`, `k1` for `k1_n_per_mm`) is matched by its start rather than by an
 /// unrelated short name.
 pub fn nearest<'a>(name: &str, candidates: &[&'a str]) -> Option<&'a str> {
+    let name: String = name.chars().take(MAX_COMPARED_CHARS).collect();
+    let name = name.as_str();
     let score = |c: &str| -> (usize, usize) {
         let chars: Vec<(usize, char)> = c.char_indices().collect();
         (0..=chars.len())
@@ -182,6 +224,10 @@ fn expected(e: &str) -> String {
 
 /// Reads TOML `text` into `T` (whose structs deny unknown fields); errors as in the module doc.
 pub fn from_toml<T: DeserializeOwned>(text: &str) -> Result<T, ConfigError> {
+    from_toml_inner(text).map_err(ConfigError::shortened)
+}
+
+fn from_toml_inner<T: DeserializeOwned>(text: &str) -> Result<T, ConfigError> {
     if let Err(e) = text.parse::<toml::Table>() {
         let at = e
             .span()
@@ -287,6 +333,13 @@ fn explain(msg: &str, text: &str, offset: usize, line: usize, col: usize) -> Con
 /// all be optional: a failure is traced to the first key that fails on its own, so the error
 /// names it (the table was parsed elsewhere, so there is no line).
 pub fn from_table<T: DeserializeOwned>(table: &toml::Table, name: &str) -> Result<T, ConfigError> {
+    from_table_inner(table, name).map_err(ConfigError::shortened)
+}
+
+fn from_table_inner<T: DeserializeOwned>(
+    table: &toml::Table,
+    name: &str,
+) -> Result<T, ConfigError> {
     let whole = toml::Value::Table(table.clone()).try_into::<T>();
     let err = match whole {
         Ok(v) => return Ok(v),

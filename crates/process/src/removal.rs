@@ -655,7 +655,7 @@ pub fn deposit_exact(
 
 /// The exact deposition's sub-step (mm): `opts.max_step_mm`, else a quarter pixel and 1/80 of
 /// the footprint's smaller half-extent.
-pub(crate) fn exact_step(
+pub fn exact_step(
     field: &dyn RateField,
     grid: &Grid,
     opts: &ExactOptions,
@@ -678,7 +678,7 @@ pub(crate) fn exact_step(
 
 /// Refuses, before anything is allocated, an exact deposition that would walk too many
 /// sub-steps or update too many pixels (footprint half-extents `(ex, ey)` mm).
-pub(crate) fn check_exact_budget(
+pub fn check_exact_budget(
     path: &PathLog,
     grid: &Grid,
     step: f64,

@@ -36,9 +36,48 @@ pub enum ToolModel {
     Bonnet(Tif, Box<BonnetTif>),
 }
 
+/// Most pixels a TIF footprint may cover at the map pitch (1001 x 1001, 8 MB per copy: a 50 mm
+/// bonnet at 0.05 mm pixels). The pipelines hold several copies (sampled, anti-aliased, three
+/// motion kernels averaged over sub-samples) and transform the map grown by the footprint:
+/// measured on this machine, a 1991 x 1991 footprint took `simulate` 15 s and 330 MB, a
+/// 9001 x 9001 one (a model of metres) aborted at 1 GiB, and a spot map whose pixel size is
+/// wrong by 100x ran for minutes.
+pub const MAX_TIF_PIXELS: f64 = 1001.0 * 1001.0;
+
+fn sig4(v: f64) -> String {
+    bonnetlab_surface::format::sig(v, 4)
+}
+
+/// Refuses, before anything is sampled, a footprint of more than [`MAX_TIF_PIXELS`] at pixel
+/// (dx, dy) mm.
+pub fn check_footprint(field: &dyn RateField, dx_mm: f64, dy_mm: f64) -> Result<(), ProcessError> {
+    let (ex, ey) = field.half_extent_mm();
+    let (w, h) = (
+        2.0 * (ex / dx_mm + 1e-9).floor() + 1.0,
+        2.0 * (ey / dy_mm + 1e-9).floor() + 1.0,
+    );
+    // NaN (a non-finite extent) fails this test too.
+    let fits = w * h <= MAX_TIF_PIXELS;
+    if !fits {
+        return Err(ProcessError::invalid(format!(
+            "the TIF footprint ({} x {} mm) covers {} x {} pixels of the map ({} x {} mm), \
+             over the limit of 1001 x 1001 pixels: check the spot map's pixel size or the \
+             model's size",
+            sig4(2.0 * ex),
+            sig4(2.0 * ey),
+            sig4(w),
+            sig4(h),
+            sig4(dx_mm),
+            sig4(dy_mm),
+        )));
+    }
+    Ok(())
+}
+
 impl ToolModel {
     /// Builds the TIF of a recipe's `[tif]` at pixel (dx, dy); `spot` must be the spot map when
-    /// the source is a measured spot.
+    /// the source is a measured spot. A footprint over [`MAX_TIF_PIXELS`] at that pixel is
+    /// refused before it is sampled.
     pub fn from_source(
         src: &TifSource,
         spot: Option<&Surface>,
@@ -50,13 +89,16 @@ impl ToolModel {
                 let s =
                     spot.ok_or_else(|| ProcessError::invalid("a measured TIF needs its spot map"))?;
                 let m = MeasuredTif::from_spot(s, *dwell_s, &SpotOptions::default())?;
+                check_footprint(&m, dx_mm, dy_mm)?;
                 ToolModel::Measured(Tif::sample(&m, dx_mm, dy_mm)?, Box::new(m))
             }
             TifSource::Gaussian(g) => {
+                check_footprint(g, dx_mm, dy_mm)?;
                 ToolModel::Gaussian(Tif::sample_antialiased(g, dx_mm, dy_mm)?, *g)
             }
             TifSource::Bonnet(p) => {
                 let m = BonnetTif::new(p)?;
+                check_footprint(&m, dx_mm, dy_mm)?;
                 // A footprint that falls to zero at its edge is point-sampled: that matches the
                 // exact deposition at pixel centres; a hard edge (uniform pressure) is
                 // anti-aliased so its area is right.
@@ -161,4 +203,32 @@ pub fn predict(
     after.provenance.format = "synthetic".into();
     after.provenance.comment = Some("predicted after map".into());
     Ok(Prediction { removal, after })
+}
+
+#[cfg(test)]
+mod footprint_tests {
+    use super::*;
+    use crate::tif::GaussianTif;
+
+    fn gaussian(diameter_mm: f64) -> TifSource {
+        TifSource::Gaussian(GaussianTif::new(diameter_mm / 6.0, diameter_mm, 10.0).unwrap())
+    }
+
+    /// Issue #18: a footprint of metres at a 1 mm pixel (9001 x 9001 pixels) used 1.5 GB and
+    /// over a minute in `simulate`; it is refused before sampling, with the sizes. The bound is
+    /// exact: 1001 x 1001 pixels pass, 1003 x 1003 do not.
+    #[test]
+    fn a_footprint_over_the_pixel_budget_is_refused_before_sampling() {
+        let e = ToolModel::from_source(&gaussian(9000.0), None, 1.0, 1.0)
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(e.contains("the TIF footprint (9000 x 9000 mm)"), "{e}");
+        assert!(e.contains("9001 x 9001 pixels"), "{e}");
+        assert!(!e.contains('\n'), "{e}");
+        assert!(ToolModel::from_source(&gaussian(1000.0), None, 1.0, 1.0).is_ok());
+        assert!(ToolModel::from_source(&gaussian(1002.0), None, 1.0, 1.0).is_err());
+        // An ordinary tool at a fine pixel is untouched.
+        assert!(ToolModel::from_source(&gaussian(20.0), None, 0.05, 0.05).is_ok());
+    }
 }

@@ -13,9 +13,16 @@
 //! `HARD_CAP` is refused, which aborts after printing the input's coordinates). A watchdog
 //! stops the run if one input takes more than 30 s. Findings are saved to `--out`.
 //!
+//! The structured readers (`recipe-x`, `path-x`, `manifest-x`, `dwell-x`) keep a valid input's
+//! structure and change its content: extreme numbers (mutate::extreme_numbers), structural
+//! edits (missing / duplicated keys and tables, values of another type, very long strings,
+//! huge counts of rows or tables: mutate::structural_toml, mutate::structural_csv), and for
+//! path logs generated rasters with extreme rows. `recipe-x` then runs the checks simulate and
+//! calibrate make before allocating (plan.rs) and flags an accepted input predicted over 1 GB.
+//!
 //! Usage: fuzz_readers [--iterations N] [--seed S] [--reader NAME|all] [--out DIR]
 //!        [--replay ITER]
-//! Readers: dat asc xyz datx csv exr detect path recipe.
+//! Readers: dat asc xyz datx csv exr detect path recipe recipe-x path-x manifest-x dwell-x.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -30,6 +37,7 @@ use bonnetlab_surface::Surface;
 use ndarray::Array2;
 
 mod mutate;
+mod plan;
 use mutate::mutate;
 
 /// Allowed peak live bytes per input byte, plus a fixed slack (parsers build f64 heights and a
@@ -41,6 +49,7 @@ const HARD_CAP: usize = 4 << 30;
 /// Peak-allocation bound of the structured readers (bytes): 320 MiB.
 const STRUCTURED_ALLOC_BOUND: usize = 320 << 20;
 const SLOW: Duration = Duration::from_secs(1);
+const SLOW_STRUCTURED: Duration = Duration::from_secs(10);
 
 static LIVE: AtomicUsize = AtomicUsize::new(0);
 static PEAK: AtomicUsize = AtomicUsize::new(0);
@@ -198,6 +207,15 @@ impl Reader {
 
     /// Runs the reader; Err carries the error message.
     fn run(self, bytes: &[u8]) -> Result<(), String> {
+        // The CLI reads a recipe, case or manifest only up to this size (`input::read_text`).
+        if matches!(self, Reader::RecipeX | Reader::ManifestX | Reader::DwellX)
+            && bytes.len() as u64 > bonnetlab_io::input::TEXT_LIMIT
+        {
+            return Err(format!(
+                "input of {} bytes: over the text limit",
+                bytes.len()
+            ));
+        }
         let map = |r: Result<Surface, ParseError>| r.map(check_surface).map_err(|e| e.to_string());
         match self {
             Reader::Dat => map(bonnetlab_io::parse_bytes(bytes, MapFormat::MetroProDat))?,
@@ -224,10 +242,21 @@ impl Reader {
                     return Err("BUG: non-finite value accepted".into());
                 }
             }
-            Reader::Recipe | Reader::RecipeX => {
+            Reader::Recipe => {
                 let text = String::from_utf8_lossy(bytes);
                 bonnetlab_process::Recipe::parse(&text, Path::new("/nonexistent/recipe.toml"))
                     .map_err(|e| e.to_string())?;
+            }
+            Reader::RecipeX => {
+                let text = String::from_utf8_lossy(bytes);
+                let name = Path::new("/nonexistent/recipe.toml");
+                // `vibration RECIPE` reads the document and its [process] / [vibration] only.
+                if let Ok(doc) = bonnetlab_process::recipe::RecipeDoc::parse(&text, name) {
+                    let _ = bonnetlab_vibration::params::VibrationParams::from_recipe(&doc);
+                }
+                let recipe =
+                    bonnetlab_process::Recipe::parse(&text, name).map_err(|e| e.to_string())?;
+                plan::recipe(&recipe, bytes)?;
             }
             Reader::PathX => {
                 use bonnetlab_process::path::kinematics::{apply_limits, Limits};
@@ -362,6 +391,11 @@ const RECIPE_MODEL: &str = "[measurement]\nbefore = \"b.csv\"\nafter = \"a.csv\"
 model = { kind = \"gaussian\", sigma_mm = 1.0, peak_rate_nm_per_s = 10.0, diameter_mm = 10.0 }\n\
 [path]\nlog = \"p.csv\"\n";
 
+const RECIPE_BONNET: &str = "[measurement]\nbefore = \"b.csv\"\n[tif]\n\
+model = { kind = \"bonnet\", radius_mm = 20.0, offset_mm = 0.3, peak_rate_nm_per_s = 20.0 }\n\
+[path]\nlog = \"p.csv\"\npitch_mm = 1.0\n[process]\nspindle_rpm = 1200.0\n\
+inner_pressure_mpa = 0.2\n[vibration]\nstiffness_n_per_m = 2.0e6\n";
+
 const SPOT_MANIFEST: &str = "[defaults]\ndwell_s = 120.0\nprecession_deg = 20.0\n\
 spindle_rpm = 500.0\ninner_pressure_mpa = 0.25\nring_inner_mm = 8.0\nring_outer_mm = 11.0\n\n\
 [[spot]]\nfile = \"a.dat\"\nbonnet = \"original\"\noffset_mm = 0.2\n\n\
@@ -439,9 +473,15 @@ fn seeds(r: Reader) -> Vec<(Vec<u8>, u32)> {
                 50,
             ),
         ],
-        Reader::Recipe | Reader::RecipeX => vec![
+        Reader::Recipe => vec![
             (RECIPE.as_bytes().to_vec(), 100),
             (RECIPE_MODEL.as_bytes().to_vec(), 50),
+        ],
+        // Model TIFs weigh more here: their checks go further (plan.rs).
+        Reader::RecipeX => vec![
+            (RECIPE.as_bytes().to_vec(), 50),
+            (RECIPE_MODEL.as_bytes().to_vec(), 50),
+            (RECIPE_BONNET.as_bytes().to_vec(), 50),
         ],
         // Generated per input (mutate::extreme_path_log); the seed is unused.
         Reader::PathX => vec![(Vec::new(), 1)],
@@ -463,6 +503,8 @@ struct Tally {
     slow: u64,
     multiline: u64,
     over_alloc: u64,
+    /// Accepted inputs predicted to need more than the issue's 1 GB (`BUDGET:`).
+    over_budget: u64,
     max_time: Duration,
     max_ratio: f64,
     max_peak: usize,
@@ -522,9 +564,25 @@ fn input_for(r: Reader, seeds: &[(Vec<u8>, u32)], total_w: u64, seed: u64, iter:
     }
     match r {
         Reader::RecipeX | Reader::ManifestX | Reader::DwellX => {
-            mutate::extreme_numbers(&mut data, &mut rng)
+            // Half extreme numbers only, a quarter structural edits only, a quarter both.
+            let how = rng.below(4);
+            if how != 1 {
+                mutate::extreme_numbers(&mut data, &mut rng);
+            }
+            if how != 0 && how != 2 {
+                if data.contains(&b'=') {
+                    mutate::structural_toml(&mut data, &mut rng);
+                } else {
+                    mutate::structural_csv(&mut data, &mut rng);
+                }
+            }
         }
-        Reader::PathX => data = mutate::extreme_path_log(&mut rng),
+        Reader::PathX => {
+            data = mutate::extreme_path_log(&mut rng);
+            if rng.below(10) < 3 {
+                mutate::structural_csv(&mut data, &mut rng);
+            }
+        }
         _ => mutate(r, &mut data, &mut rng),
     }
     data
@@ -566,6 +624,11 @@ fn fuzz(r: Reader, iterations: u64, seed: u64, out: &Path, replay: Option<u64>) 
         }
         match res {
             Ok(Ok(())) => t.ok += 1,
+            Ok(Err(msg)) if msg.starts_with("BUDGET:") => {
+                t.ok += 1;
+                t.over_budget += 1;
+                save(out, r, iter, "budget", &data, &msg);
+            }
             Ok(Err(msg)) => {
                 t.errors += 1;
                 if msg.contains(['\n', '\r']) || msg.starts_with("BUG") {
@@ -582,7 +645,14 @@ fn fuzz(r: Reader, iterations: u64, seed: u64, out: &Path, replay: Option<u64>) 
                 save(out, r, iter, "panic", &data, &msg);
             }
         }
-        if dt > SLOW {
+        // Structured inputs are held to the issue's bound (10 s); byte readers to 1 s.
+        if dt
+            > if r.is_structured() {
+                SLOW_STRUCTURED
+            } else {
+                SLOW
+            }
+        {
             t.slow += 1;
             save(
                 out,
@@ -595,8 +665,9 @@ fn fuzz(r: Reader, iterations: u64, seed: u64, out: &Path, replay: Option<u64>) 
         }
         // A structured input's size does not bound its work: a 400-row path log may re-time to
         // the documented 4e6-point limit (about 220 MB). Their bound is that, plus the slack.
+        // Text of up to 16 MiB costs the TOML parser about 32 bytes per input byte.
         let bound = if r.is_structured() {
-            STRUCTURED_ALLOC_BOUND
+            STRUCTURED_ALLOC_BOUND.max(ALLOC_PER_BYTE * data.len() + ALLOC_SLACK)
         } else {
             ALLOC_PER_BYTE * data.len() + ALLOC_SLACK
         };
@@ -617,6 +688,18 @@ fn fuzz(r: Reader, iterations: u64, seed: u64, out: &Path, replay: Option<u64>) 
     }
     t.elapsed = started.elapsed();
     t
+}
+
+/// The process's peak resident set (`VmHWM` of /proc/self/status).
+fn peak_rss() -> String {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .map(|l| l["VmHWM:".len()..].trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown".into())
 }
 
 fn main() {
@@ -683,8 +766,24 @@ fn main() {
             t.elapsed.as_secs_f64()
         );
         println!(
-            "LARGEST single allocation so far: {} bytes",
-            LARGEST.load(Ordering::Relaxed)
+            "LARGEST single allocation so far: {} bytes; peak RSS so far (VmHWM): {}",
+            LARGEST.load(Ordering::Relaxed),
+            peak_rss()
         );
+        if r.is_structured() {
+            println!(
+                "{}: accepted over the 1 GB budget: {}",
+                r.name(),
+                t.over_budget
+            );
+        }
+        if r == Reader::RecipeX {
+            println!(
+                "recipe-x: passed every pre-allocation check: {}; footprints over 250k pixels \
+                 size-checked but not sampled: {}",
+                plan::ACCEPTED.load(Ordering::Relaxed),
+                plan::LARGE_TIFS.load(Ordering::Relaxed)
+            );
+        }
     }
 }
