@@ -199,37 +199,52 @@ impl ColumnCache {
     }
 }
 
-/// 128-bit fingerprint of a column request (two independently seeded SipHash streams; the
-/// standard hasher's keys are fixed, so it is deterministic).
-fn fingerprint(scale: f64, exec: &PathLog, terms: &[(Channel, Option<&[f64]>)]) -> u128 {
-    use std::hash::Hasher;
-    let mut out = 0u128;
-    for seed in [0x243F_6A88_85A3_08D3u64, 0x1319_8A2E_0370_7344] {
-        let mut h = std::collections::hash_map::DefaultHasher::new();
-        h.write_u64(seed);
-        h.write_u64(scale.to_bits());
-        for v in [&exec.t_s, &exec.x_mm, &exec.y_mm] {
-            h.write_usize(v.len());
-            for x in v.iter() {
-                h.write_u64(x.to_bits());
-            }
-        }
-        for (ch, g) in terms {
-            h.write_u8(*ch as u8);
-            match g {
-                None => h.write_u8(0),
-                Some(g) => {
-                    h.write_u8(1);
-                    h.write_usize(g.len());
-                    for x in g.iter() {
-                        h.write_u64(x.to_bits());
-                    }
-                }
-            }
-        }
-        out = (out << 64) | h.finish() as u128;
+/// Two 64-bit multiply-xorshift streams over 64-bit words: a 128-bit fingerprint, fast on the
+/// hundreds of kilobytes of a path, deterministic, and with no structure the forward model's
+/// inputs could align with.
+struct Fingerprint([u64; 2]);
+
+impl Fingerprint {
+    const MUL: [u64; 2] = [0x9E37_79B9_7F4A_7C15, 0xD6E8_FEB8_6659_FD93];
+
+    fn new() -> Self {
+        Fingerprint([0x243F_6A88_85A3_08D3, 0x1319_8A2E_0370_7344])
     }
-    out
+
+    fn word(&mut self, w: u64) {
+        for (h, m) in self.0.iter_mut().zip(Self::MUL) {
+            let x = (*h ^ w).wrapping_mul(m);
+            *h = x ^ (x >> 29);
+        }
+    }
+
+    fn slice(&mut self, v: &[f64]) {
+        self.word(v.len() as u64);
+        for x in v {
+            self.word(x.to_bits());
+        }
+    }
+
+    fn finish(self) -> u128 {
+        ((self.0[0] as u128) << 64) | self.0[1] as u128
+    }
+}
+
+/// 128-bit fingerprint of a column request.
+fn fingerprint(scale: f64, exec: &PathLog, terms: &[(Channel, Option<&[f64]>)]) -> u128 {
+    let mut h = Fingerprint::new();
+    h.word(scale.to_bits());
+    for v in [&exec.t_s, &exec.x_mm, &exec.y_mm] {
+        h.slice(v);
+    }
+    for (ch, g) in terms {
+        h.word(1 + *ch as u64);
+        match g {
+            None => h.word(u64::MAX),
+            Some(g) => h.slice(g),
+        }
+    }
+    h.finish()
 }
 
 impl Problem {
