@@ -142,5 +142,9 @@ fn sandwich(
     let a = nalgebra::DMatrix::from_fn(n, n, |i, j| a_inv[i][j]);
     let b = nalgebra::DMatrix::from_fn(n, n, |i, j| bm[i][j]);
     let s = &a * b * &a * corr;
-    Some((0..n).map(|i| (0..n).map(|j| s[(i, j)]).collect()).collect())
+    Some(
+        (0..n)
+            .map(|i| (0..n).map(|j| s[(i, j)]).collect())
+            .collect(),
+    )
 }
