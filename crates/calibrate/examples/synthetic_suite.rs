@@ -4,6 +4,10 @@
 //!
 //!     cargo run --release -p bonnetlab-calibrate --example synthetic_suite
 //!
+//! `cpu (s)` is the process's user + system time over the calibration (all threads, from
+//! /proc/self/stat at 100 ticks per second; empty where it cannot be read): on a shared
+//! machine it varies much less with the load than the wall time.
+//!
 //! Used for the before/after table of reports/calibration_model.md (the same command on two
 //! commits).
 
@@ -26,6 +30,16 @@ fn case(
     };
     f(&mut c);
     (name.to_string(), c)
+}
+
+/// User + system CPU time of this process (s), all threads; None off Linux.
+fn cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which is in parentheses and may contain spaces).
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
 }
 
 fn main() {
@@ -101,16 +115,20 @@ fn main() {
             none,
         ),
     ];
-    println!("| run | seed | accepted | final residual (nm) | noise floor (nm) | residual / floor | wall (s) |");
-    println!("|---|---|---|---|---|---|---|");
+    println!("| run | seed | accepted | final residual (nm) | noise floor (nm) | residual / floor | wall (s) | cpu (s) |");
+    println!("|---|---|---|---|---|---|---|---|");
     for (name, cfg) in cases {
         let run = match generate(&cfg) {
             Ok(r) => r,
             Err(e) => {
-                println!("| {name} | {} | generation failed: {e} | | | | |", cfg.seed);
+                println!(
+                    "| {name} | {} | generation failed: {e} | | | | | |",
+                    cfg.seed
+                );
                 continue;
             }
         };
+        let c0 = cpu_s();
         let t = Instant::now();
         let out = problem_with_spot(
             &run.before,
@@ -121,6 +139,10 @@ fn main() {
         )
         .and_then(|p| calibrate(&p, &Options::default()));
         let wall = t.elapsed().as_secs_f64();
+        let cpu = match (c0, cpu_s()) {
+            (Some(a), Some(b)) => format!("{:.2}", b - a),
+            _ => String::new(),
+        };
         match out {
             Ok(c) => {
                 let acc: Vec<String> = c
@@ -136,7 +158,7 @@ fn main() {
                     })
                     .collect();
                 println!(
-                    "| {name} | {} | {} | {:.4} | {:.4} | {:.2} | {wall:.1} |",
+                    "| {name} | {} | {} | {:.4} | {:.4} | {:.2} | {wall:.1} | {cpu} |",
                     cfg.seed,
                     if acc.is_empty() {
                         "none".to_string()
@@ -149,7 +171,7 @@ fn main() {
                 );
             }
             Err(e) => println!(
-                "| {name} | {} | calibration failed: {e} | | | | {wall:.1} |",
+                "| {name} | {} | calibration failed: {e} | | | | {wall:.1} | {cpu} |",
                 cfg.seed
             ),
         }

@@ -154,10 +154,98 @@ pub struct Problem {
     kernels: Mutex<Vec<Arc<Kernels>>>,
     resampler: Resampler,
     resampled: ResampleCache,
+    columns: Mutex<ColumnCache>,
     coarse: std::sync::OnceLock<Option<crate::coarse::Coarse>>,
 }
 
 type ResampleCache = Mutex<Vec<([f64; 3], Arc<(Array2<f64>, Array2<bool>)>)>>;
+
+/// Bytes of columns kept between requests (see [`ColumnCache`]).
+const COLUMN_CACHE_BYTES: usize = 128 << 20;
+
+/// Forward-model columns already computed, by a 128-bit fingerprint of everything they depend
+/// on: the executed path (times and positions), the TIF scale and each term's channel and rate
+/// weights. Selection rounds, candidates and refinement ask for the same column many times
+/// (the same covariate on an unchanged path, the baseline of every trial that moves only the
+/// registration); each is computed once. Oldest first out beyond [`COLUMN_CACHE_BYTES`].
+#[derive(Default)]
+struct ColumnCache {
+    map: std::collections::HashMap<u128, Arc<Vec<f64>>>,
+    order: std::collections::VecDeque<u128>,
+    bytes: usize,
+}
+
+impl ColumnCache {
+    fn get(&self, key: u128) -> Option<Arc<Vec<f64>>> {
+        self.map.get(&key).cloned()
+    }
+
+    fn put(&mut self, key: u128, col: Arc<Vec<f64>>) {
+        let size = 8 * col.len();
+        if size > COLUMN_CACHE_BYTES || self.map.contains_key(&key) {
+            return;
+        }
+        while self.bytes + size > COLUMN_CACHE_BYTES {
+            let Some(old) = self.order.pop_front() else {
+                break;
+            };
+            if let Some(c) = self.map.remove(&old) {
+                self.bytes -= 8 * c.len();
+            }
+        }
+        self.bytes += size;
+        self.order.push_back(key);
+        self.map.insert(key, col);
+    }
+}
+
+/// Two 64-bit multiply-xorshift streams over 64-bit words: a 128-bit fingerprint, fast on the
+/// hundreds of kilobytes of a path, deterministic, and with no structure the forward model's
+/// inputs could align with.
+struct Fingerprint([u64; 2]);
+
+impl Fingerprint {
+    const MUL: [u64; 2] = [0x9E37_79B9_7F4A_7C15, 0xD6E8_FEB8_6659_FD93];
+
+    fn new() -> Self {
+        Fingerprint([0x243F_6A88_85A3_08D3, 0x1319_8A2E_0370_7344])
+    }
+
+    fn word(&mut self, w: u64) {
+        for (h, m) in self.0.iter_mut().zip(Self::MUL) {
+            let x = (*h ^ w).wrapping_mul(m);
+            *h = x ^ (x >> 29);
+        }
+    }
+
+    fn slice(&mut self, v: &[f64]) {
+        self.word(v.len() as u64);
+        for x in v {
+            self.word(x.to_bits());
+        }
+    }
+
+    fn finish(self) -> u128 {
+        ((self.0[0] as u128) << 64) | self.0[1] as u128
+    }
+}
+
+/// 128-bit fingerprint of a column request.
+fn fingerprint(scale: f64, exec: &PathLog, terms: &[(Channel, Option<&[f64]>)]) -> u128 {
+    let mut h = Fingerprint::new();
+    h.word(scale.to_bits());
+    for v in [&exec.t_s, &exec.x_mm, &exec.y_mm] {
+        h.slice(v);
+    }
+    for (ch, g) in terms {
+        h.word(1 + *ch as u64);
+        match g {
+            None => h.word(u64::MAX),
+            Some(g) => h.slice(g),
+        }
+    }
+    h.finish()
+}
 
 impl Problem {
     pub fn new(
@@ -233,6 +321,7 @@ impl Problem {
             kernels: Mutex::new(Vec::new()),
             resampler,
             resampled: Mutex::new(Vec::new()),
+            columns: Mutex::new(ColumnCache::default()),
             coarse: std::sync::OnceLock::new(),
         })
     }
@@ -271,10 +360,34 @@ impl Problem {
         exec: &PathLog,
         g: Option<&[f64]>,
     ) -> Result<Vec<f64>, CalibrateError> {
+        self.column(k, exec, &[(ch, g)])
+    }
+
+    /// `sum_m R_{ch_m}(exec, g_m)` on the analysis pixels: the forward model through channel
+    /// `ch_m` of the executed path with rate weights `g_m` (computed once per distinct request,
+    /// see [`ColumnCache`]).
+    pub fn column(
+        &self,
+        k: &Kernels,
+        exec: &PathLog,
+        terms: &[(Channel, Option<&[f64]>)],
+    ) -> Result<Vec<f64>, CalibrateError> {
         let mut c = k
             .lock()
             .map_err(|_| CalibrateError::Processing("forward model poisoned".into()))?;
-        Ok(self.compress(&c.removal(ch, exec, g)?))
+        let key = fingerprint(c.scale(), exec, terms);
+        if let Some(hit) = self.columns.lock().ok().and_then(|m| m.get(key)) {
+            return Ok(hit.as_ref().clone());
+        }
+        let col = match terms {
+            [(ch, g)] => self.compress(&c.removal(*ch, exec, *g)?),
+            _ => self.compress(&c.removal_sum(exec, terms)?),
+        };
+        drop(c);
+        if let Ok(mut m) = self.columns.lock() {
+            m.put(key, Arc::new(col.clone()));
+        }
+        Ok(col)
     }
 
     /// The coarse registration of the after map onto the before map (computed once).

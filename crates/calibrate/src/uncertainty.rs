@@ -139,19 +139,12 @@ fn sandwich(
         }
     }
     let corr = g / (g - 1.0);
-    let mut t = vec![vec![0.0; n]; n];
-    for a in 0..n {
-        for c in 0..n {
-            t[a][c] = (0..n).map(|k| a_inv[a][k] * bm[k][c]).sum::<f64>() * corr;
-        }
-    }
+    let a = nalgebra::DMatrix::from_fn(n, n, |i, j| a_inv[i][j]);
+    let b = nalgebra::DMatrix::from_fn(n, n, |i, j| bm[i][j]);
+    let s = &a * b * &a * corr;
     Some(
         (0..n)
-            .map(|a| {
-                (0..n)
-                    .map(|c| (0..n).map(|k| t[a][k] * a_inv[k][c]).sum())
-                    .collect()
-            })
+            .map(|i| (0..n).map(|j| s[(i, j)]).collect())
             .collect(),
     )
 }

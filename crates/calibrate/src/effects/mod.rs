@@ -83,15 +83,11 @@ impl Current<'_> {
     /// executed path with rate weights `g_m`), on the analysis pixels; zeros when a channel
     /// cannot be evaluated (no candidate can come of it).
     pub fn column(&self, terms: &[(&[f64], Channel)]) -> Vec<f64> {
-        let sum = self.ev.kernels.lock().ok().and_then(|mut c| {
-            let t: Vec<(Channel, Option<&[f64]>)> =
-                terms.iter().map(|(g, ch)| (*ch, Some(*g))).collect();
-            c.removal_sum(&self.ev.exec, &t).ok()
-        });
-        match sum {
-            Some(a) => self.p.compress(&a),
-            None => vec![0.0; self.p.idx.len()],
-        }
+        let t: Vec<(Channel, Option<&[f64]>)> =
+            terms.iter().map(|(g, ch)| (*ch, Some(*g))).collect();
+        self.p
+            .column(&self.ev.kernels, &self.ev.exec, &t)
+            .unwrap_or_else(|_| vec![0.0; self.p.idx.len()])
     }
 
     /// Column of the plain executed path through channel `ch` (no rate weights).
