@@ -18,11 +18,9 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use serde_json::{json, Value};
 
-use super::stats::{read_map, stats_report};
 use super::CliError;
-use bonnetlab_spectrum::{
-    psd_xy, ripple_from_psds, PsdOptions, RippleOptions, SpectrumError, Window,
-};
+use crate::pipeline::stats::batch_value;
+use bonnetlab_spectrum::Window;
 use bonnetlab_surface::Term;
 
 #[derive(Debug, clap::Args)]
@@ -109,39 +107,7 @@ pub fn map_line(
     window: Window,
     pixel_mm: Option<(f64, f64)>,
 ) -> Value {
-    let result = (|| -> Result<Value, CliError> {
-        let mut s = read_map(file)?;
-        if let Some((px, py)) = pixel_mm {
-            s.dx_mm = Some(s.dx_mm.unwrap_or(px));
-            s.dy_mm = Some(s.dy_mm.unwrap_or(py));
-        }
-        let report = stats_report(file, &s, terms, false)?;
-        let mut v = serde_json::to_value(&report).map_err(|e| CliError::processing(file, e))?;
-        if let Some(p) = pitch_mm {
-            let opts = PsdOptions {
-                window,
-                remove: terms.to_vec(),
-                ..PsdOptions::default()
-            };
-            let (x, y) = psd_xy(&s, &opts).map_err(|e| CliError::input(file, e))?;
-            // A pitch the map cannot resolve (longer than the field, or f0 beyond Nyquist) is
-            // not a failed map: the ripple is absent with its reason, as `psd` reports it.
-            let (key, value) = match ripple_from_psds(&x, &y, p, &RippleOptions::default()) {
-                Ok(r) => (
-                    "ripple",
-                    serde_json::to_value(&r).map_err(|e| CliError::processing(file, e))?,
-                ),
-                Err(e @ SpectrumError::NotResolvable(_)) => ("ripple_reason", json!(e.to_string())),
-                Err(e) => return Err(CliError::input(file, e)),
-            };
-            if let Value::Object(m) = &mut v {
-                m.insert("window".into(), json!(window.name()));
-                m.insert(key.into(), value);
-            }
-        }
-        Ok(v)
-    })();
-    result.unwrap_or_else(|e| {
+    batch_value(file, terms, pitch_mm, window, pixel_mm).unwrap_or_else(|e| {
         json!({
             "file": file.display().to_string(),
             "error": super::compare::hint_pixel_mm(e.message),

@@ -7,10 +7,10 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use super::CliError;
 use crate::pipeline::bonnets::{self, RunInput};
+use crate::pipeline::compare::{compare, CompareError, Comparison, RunSpec, Settings};
+use crate::pipeline::run_spec::parse_recipe_run;
 use crate::report::compare_report::write_report_full;
-use crate::report::comparison::{compare, CompareError, Comparison, RunSpec, Settings};
 use crate::report::format::fixed;
-use crate::report::run_spec::parse_recipe_run;
 use bonnetlab_process::recipe::Recipe;
 use bonnetlab_spectrum::Window;
 use bonnetlab_surface::Term;

@@ -12,6 +12,7 @@ pub mod compare;
 pub mod demo;
 pub mod dwell;
 pub mod error;
+pub mod progress;
 pub mod psd;
 pub mod simulate;
 pub mod spots;
@@ -20,28 +21,7 @@ pub mod vibration;
 
 pub use error::CliError;
 
-/// A vibration-parameter error of a recipe, labelled with the table the value came from: the
-/// coupling reads `spindle_rpm`, `offset_mm` and `inner_pressure_mpa` from `[vibration]` when
-/// that table sets them and from `[process]` otherwise, so a bad `[process]` value is reported
-/// as `[process] KEY`, not as `[vibration] KEY`. Parameter errors are bad input (exit 2).
-pub(crate) fn vibration_error(
-    file: &Path,
-    vibration_table: Option<&toml::Table>,
-    e: bonnetlab_vibration::VibrationError,
-) -> CliError {
-    use bonnetlab_vibration::VibrationError as E;
-    const FROM_PROCESS: [&str; 3] = ["spindle_rpm", "offset_mm", "inner_pressure_mpa"];
-    match e {
-        E::InvalidParam { key, what }
-            if FROM_PROCESS.contains(&key.as_str())
-                && !vibration_table.is_some_and(|t| t.contains_key(&key)) =>
-        {
-            CliError::input(file, format!("[process] {key}: {what}"))
-        }
-        E::InvalidParam { .. } | E::Table(_) | E::Conflict(..) => CliError::input(file, e),
-        _ => CliError::processing(file, e),
-    }
-}
+pub(crate) use crate::pipeline::error::vibration_error;
 
 /// bonnetlab: surface metrology, polishing simulation and vibration analysis for robot
 /// bonnet polishing.

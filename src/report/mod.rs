@@ -2,6 +2,7 @@
 //! Nothing outside this module formats text for people.
 
 pub mod bonnets;
+pub mod calibration;
 pub mod compare_report;
 pub mod comparison;
 pub mod dwell_report;
@@ -11,6 +12,9 @@ pub mod html;
 pub mod maps;
 pub mod msf_prediction;
 pub mod plot;
-pub mod run_spec;
+pub mod psd;
 pub mod samples;
+pub mod simulate;
+pub mod spots;
+pub mod stats;
 pub mod write;

@@ -106,16 +106,11 @@ pub fn load_recipe(recipe_path: &Path) -> Result<Problem, PipelineError> {
     // the path (the same check as `simulate`).
     let grid = bonnetlab_process::Grid::of(&before)
         .map_err(|e| PipelineError::input(&recipe.before, e))?;
-    let (ex, ey) = tool.field().half_extent_mm();
-    bonnetlab_process::path::log::check_extent(
+    bonnetlab_process::path::log::check_run_extent(
         &path,
         &recipe.path_log,
-        (grid.x0_mm, grid.x_mm(grid.cols - 1)),
-        (grid.y0_mm, grid.y_mm(grid.rows - 1)),
-        // Overtravel beyond the spot (turnarounds off the part) is allowed up to one part
-        // length; anything further is a corrupt log.
-        ex.max(ey)
-            + (grid.x_mm(grid.cols - 1) - grid.x0_mm).max(grid.y_mm(grid.rows - 1) - grid.y0_mm),
+        &grid,
+        tool.field().half_extent_mm(),
     )
     .map_err(|e| PipelineError::input(&recipe.path_log, e))?;
     Problem::new(&before, &after, &TifMap::new(tool), &path).map_err(|e| match e {

@@ -161,6 +161,23 @@ pub fn check_extent(
     Ok(())
 }
 
+/// The extent rule of a run (`simulate` and `calibrate` apply it before sizing anything from
+/// the log): every sample lies on the part `grid` plus the spot's half extent
+/// (`spot_half_extent_mm`, the larger of X and Y) plus one part length of overtravel
+/// (turnarounds off the part); anything further is a corrupt log, refused at its line by
+/// [`check_extent`].
+pub fn check_run_extent(
+    p: &PathLog,
+    name: &Path,
+    grid: &crate::Grid,
+    spot_half_extent_mm: (f64, f64),
+) -> Result<(), ProcessError> {
+    let (ex, ey) = spot_half_extent_mm;
+    let x = (grid.x0_mm, grid.x_mm(grid.cols - 1));
+    let y = (grid.y0_mm, grid.y_mm(grid.rows - 1));
+    check_extent(p, name, x, y, ex.max(ey) + (x.1 - x.0).max(y.1 - y.0))
+}
+
 /// Writes a path log as CSV text (`t_s,x_mm,y_mm`), full precision.
 pub fn path_to_csv(p: &PathLog) -> String {
     let mut s = String::with_capacity(p.len() * 32 + 16);
