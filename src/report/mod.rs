@@ -11,6 +11,7 @@ pub mod html;
 pub mod maps;
 pub mod msf_prediction;
 pub mod plot;
+pub mod recipe_samples;
 pub mod run_spec;
 pub mod samples;
 pub mod write;
