@@ -183,7 +183,11 @@ fn report_tables_fit_a_1280_px_window() {
         "--out".as_ref(),
         spots_out.as_os_str(),
     ]);
-    for html in [compare.join("report.html"), spots_out.join("report.html")] {
+    for html in [
+        compare.join("report.html"),
+        compare.join("bonnets").join("report.html"),
+        spots_out.join("report.html"),
+    ] {
         let (tables, page_w) = table_extents(&browser, &html, d);
         assert!(!tables.is_empty(), "{}: no table measured", html.display());
         assert!(
@@ -229,6 +233,19 @@ fn compare_report_renders_in_chromium_without_console_errors() {
     assert!(
         !console_errors(&bad_log).is_empty(),
         "the console check misses a thrown error; log:\n{bad_log}"
+    );
+
+    // The bonnet comparison (recipe runs) renders without console errors too.
+    let (_, blog) = screenshot(
+        &browser,
+        &report.join("bonnets").join("report.html"),
+        dir.path(),
+    );
+    let berrors = console_errors(&blog);
+    assert!(
+        berrors.is_empty(),
+        "console errors from the bonnets report:\n{}",
+        berrors.join("\n")
     );
 
     let (png, log) = screenshot(&browser, &html, dir.path());

@@ -85,6 +85,14 @@ fn demo_report_equals_the_committed_example() {
         }
     }
     assert!(repo.join("reports/demo/report.html").is_file());
+    // The bonnet comparison of the recipe runs (reports/demo/bonnets).
+    same_numbers(
+        &read_json(&dir.path().join("bonnets/report.json")),
+        &read_json(&repo.join("reports/demo/bonnets/report.json")),
+        "bonnets/report.json",
+    );
+    assert!(repo.join("reports/demo/bonnets/report.html").is_file());
+    assert!(err.contains("comparing the bonnets' recipe runs"), "{err}");
     // The example shows what the paper's table shows: the suppression bonnet converges better,
     // beyond the repeat noise.
     let j: serde_json::Value =

@@ -1,12 +1,17 @@
 //! `bonnetlab demo`: the bundled two-bonnet example.
 //!
 //! - `bonnetlab demo --generate-samples samples/` writes the sample maps (MetroPro `.dat`,
-//!   two repeat measurements before and after for each bonnet) and their README, from a seed
-//!   (`crate::report::samples`);
-//! - `bonnetlab demo --out reports/demo` runs `compare` on the samples (default `samples/`,
+//!   two repeat measurements before and after for each bonnet; `crate::report::samples`), the
+//!   recipe run of each bonnet (`recipe.toml`, `path.csv`, `spot.dat`, `before.dat`,
+//!   `after.dat`; `crate::pipeline::recipe_samples`) and their README, from seeds;
+//! - `bonnetlab demo --out reports/demo` runs `compare` on the repeat maps (default `samples/`,
 //!   pitch 3 mm, piston + tilt removed) and writes the report, showing its progress; the report
 //!   also carries the vibration coupling's predicted MSF per bonnet on a run matching the sample
-//!   ([`predicted_msf`]: the paper's bonnet and process parameters, 3 mm raster, sample grid).
+//!   ([`predicted_msf`]: the paper's bonnet and process parameters, 3 mm raster, sample grid);
+//!   then it runs `compare --run original=samples/original/recipe.toml --run
+//!   suppression=samples/suppression/recipe.toml --out reports/demo/bonnets` (the bonnet
+//!   comparison: measured vs predicted ripple, calibrated effects, inferred vibration forcing,
+//!   attribution of the difference).
 
 use crate::report::format::fixed;
 use std::path::{Path, PathBuf};
@@ -16,6 +21,7 @@ use super::CliError;
 use crate::report::compare_report::write_report_with;
 use crate::report::comparison::{RunSpec, Settings};
 use crate::report::msf_prediction::{PredictedMsf, PredictionRun};
+use crate::pipeline::recipe_samples::{self, RECIPE_SEED};
 use crate::report::samples::{
     generate, paper_bonnets, SAMPLE_N, SAMPLE_PITCH_MM, SAMPLE_PIXEL_MM, SAMPLE_SEED,
 };
@@ -27,20 +33,31 @@ use bonnetlab_process::Grid;
 use bonnetlab_vibration::coupling::{predict_both, CouplingInput, CouplingOptions};
 use bonnetlab_vibration::params::VibrationParams;
 
+/// What `demo --help` says.
+pub const ABOUT: &str = "Run the bundled two-bonnet example: compare the sample maps \
+(samples/original, samples/suppression; repeat measurements before and after) and write \
+OUT/report.html, report.json and PSD CSVs (default OUT reports/demo), then compare the two \
+sample recipe runs (samples/*/recipe.toml: maps, measured spot, path log, vibration model) \
+and write the bonnet comparison (measured vs predicted ripple, calibrated effects, inferred \
+vibration forcing, what explains the difference) to OUT/bonnets/. With --generate-samples DIR \
+it writes the samples instead (and the report too when --out is given). Never changes \
+samples/ unless told to.";
+
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Write the sample maps and README into this directory.
     #[arg(long, value_name = "DIR")]
     pub generate_samples: Option<PathBuf>,
-    /// Run the comparison on the samples and write the report into this directory (default
-    /// `reports/demo` when neither this nor --generate-samples is given).
+    /// Write the reports into this directory: the map comparison in DIR, the bonnet (recipe)
+    /// comparison in DIR/bonnets (default `reports/demo` when neither this nor
+    /// --generate-samples is given).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Where the samples are read from for the report; when the folder does not exist the
     /// samples are generated into OUT/samples first.
     #[arg(long, value_name = "DIR", default_value = "samples")]
     pub samples: PathBuf,
-    /// Seed of the generated sample.
+    /// Seed of the generated sample maps (the recipe runs have their own fixed seed, 16).
     #[arg(long, default_value_t = SAMPLE_SEED)]
     pub seed: u64,
     /// Repeat measurements per map in the generated sample (1 to 10000).
@@ -208,6 +225,70 @@ fn readme(seed: u64, repeats: usize) -> String {
     s.push_str(
         "PV is not set: it follows from the random fields (PV / RMS about 5, as in the paper).\n",
     );
+    s.push_str(&recipe_readme());
+    s
+}
+
+/// The README part on the recipe runs.
+fn recipe_readme() -> String {
+    use recipe_samples as rs;
+    let mut s = String::new();
+    s.push_str("\n## The recipe runs (`original/recipe.toml`, `suppression/recipe.toml`)\n\n");
+    s.push_str(
+        "One run per bonnet as a lab gives it: `recipe.toml`, `path.csv` (the robot's log, \
+         `t_s,x_mm,y_mm` at 50 Hz), `spot.dat` (the measured spot), `before.dat` and `after.dat` \
+         (MetroPro). The formats are in docs/formats.md. `bonnetlab demo` compares them with\n\n",
+    );
+    s.push_str(
+        "    bonnetlab compare --run original=samples/original/recipe.toml \\\n      \
+         --run suppression=samples/suppression/recipe.toml --out reports/demo/bonnets\n\n",
+    );
+    s.push_str(&format!(
+        "They are made by the project's synthetic-run generator (`bonnetlab_calibrate::synth`, \
+         seed {seed}) with its deposition replaced by the exact time-domain deposition of the \
+         instantaneous TIF under each bonnet's vibration model (`src/pipeline/recipe_samples.rs`):\n\n\
+         - part: {n} x {n} pixels of {d} mm, a power-law textured surface (one-sided 1-D PSD ~ \
+         f^-2, 30 nm RMS) down to half the pixel, the same part for both bonnets;\n\
+         - tool: Gaussian spot, sigma {sig} mm, truncated at {dia} mm, {peak} nm/s peak; the \
+         measured spot is that TIF dwelled {dwell} s, with 0.3 nm noise;\n\
+         - path: raster along x, {p} mm pitch, feed {v0} to {v1} mm/s realising a dwell map \
+         (more dwell where the part is high), acceleration-limited;\n\
+         - process where the vibration matters: spindle {rpm} rpm (second harmonic near the \
+         robot's resonance), normal-force fluctuation {fnn} N at the spindle harmonics and \
+         {nf} N broadband, robot damping ratio {z}; the suppression run adds the \
+         suppression element (the vibration model's suppression bonnet); at the paper's 1.6 mm/s \
+         and 1000 rpm the spindle imprint is filtered out by the spot and nothing could be \
+         inferred;\n\
+         - measurement: 0.3 nm white noise shared, plus {own} nm of each run's own, a set-up \
+         piston and tilt of the after map, about 0.2 % dropout pixels and one small dropout \
+         disc.\n\n",
+        seed = RECIPE_SEED,
+        n = rs::RECIPE_N,
+        d = rs::RECIPE_PIXEL_MM,
+        sig = rs::recipe_tif().sigma_mm,
+        dia = rs::recipe_tif().diameter_mm,
+        peak = rs::recipe_tif().peak_rate_nm_per_s,
+        dwell = rs::RECIPE_SPOT_DWELL_S,
+        p = rs::RECIPE_PITCH_MM,
+        v0 = rs::RECIPE_FEED_MM_PER_S.0,
+        v1 = rs::RECIPE_FEED_MM_PER_S.1,
+        rpm = rs::RECIPE_SPINDLE_RPM,
+        fnn = rs::RECIPE_FN_N,
+        nf = rs::RECIPE_NOISE_FORCE_N,
+        z = rs::RECIPE_ZETA,
+        own = rs::RECIPE_OWN_NOISE_NM,
+    ));
+    s.push_str("Built-in effects the report should find (the calibration is not told):\n\n");
+    s.push_str("| run | effect | truth |\n|---|---|---|\n");
+    for spec in rs::recipe_runs(RECIPE_SEED) {
+        for e in &spec.effects {
+            s.push_str(&format!("| {} | {} |\n", spec.name, rs::effect_words(e)));
+        }
+    }
+    s.push_str(
+        "\nNothing else differs between the runs, so the difference in ripple between the \
+         bonnets is the vibration's.\n",
+    );
     s
 }
 
@@ -233,6 +314,23 @@ fn generate_samples(dir: &Path, seed: u64, repeats: usize) -> Result<(), CliErro
                 message: e.to_string(),
             })?;
         eprintln!("  wrote {}", path.display());
+    }
+    for spec in recipe_samples::recipe_runs(RECIPE_SEED) {
+        let d = dir.join(spec.name);
+        eprintln!(
+            "bonnetlab demo: generating the {} recipe run (exact deposition under the vibration \
+             model, seed {})",
+            spec.name, spec.seed
+        );
+        let run = recipe_samples::generate_run(&spec).map_err(|e| CliError {
+            code: 1,
+            message: format!("demo: {}: {e}", spec.name),
+        })?;
+        recipe_samples::write_run(&d, &spec, &run).map_err(|e| CliError {
+            code: 2,
+            message: format!("{}: {e}", d.display()),
+        })?;
+        eprintln!("  wrote {}", d.join("recipe.toml").display());
     }
     crate::report::write::bytes(&dir.join("README.md"), readme(seed, repeats).as_bytes()).map_err(
         |e| CliError {
@@ -331,17 +429,99 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     for p in &written {
         eprintln!("  wrote {}", p.display());
     }
+    let b = bonnet_comparison(samples, &out.join("bonnets"))?;
     let crs: Vec<String> = c
         .runs
         .iter()
         .map(|r| format!("{} CR(RMS) {} %", r.name, fixed(100.0 * r.cr_rms, 1)))
         .collect();
     println!(
-        "demo: wrote {} ({} runs, {n} maps from {}; {})",
+        "demo: wrote {} ({} runs, {n} maps from {}; {}) and {} ({b})",
         out.join("report.html").display(),
         c.runs.len(),
         samples.display(),
-        crs.join(", ")
+        crs.join(", "),
+        out.join("bonnets").join("report.html").display(),
     );
     Ok(())
+}
+
+/// The `compare` command the demo's bonnet comparison is (docs/cli.md, samples/README.md).
+pub fn bonnet_compare_args(samples: &Path, out: &Path) -> super::compare::Args {
+    let run = |name: &str| {
+        format!(
+            "{name}={}",
+            samples.join(name).join("recipe.toml").display()
+        )
+    };
+    super::compare::Args {
+        runs: vec![run("original"), run("suppression")],
+        pitch_mm: None,
+        remove: "piston,tilt".into(),
+        window: "hann".into(),
+        pixel_mm: None,
+        pixel_mm_y: None,
+        out: out.to_path_buf(),
+    }
+}
+
+/// Runs `compare --run original=SAMPLES/original/recipe.toml --run
+/// suppression=SAMPLES/suppression/recipe.toml --out OUT` (what that command does, without its
+/// summary line) and returns a short summary of the difference for the demo's line.
+fn bonnet_comparison(samples: &Path, out: &Path) -> Result<String, CliError> {
+    for b in ["original", "suppression"] {
+        let r = samples.join(b).join("recipe.toml");
+        if !r.is_file() {
+            return Err(CliError::input(
+                &r,
+                "sample recipe missing; create the samples with \
+                 `bonnetlab demo --generate-samples DIR`",
+            ));
+        }
+    }
+    let args = bonnet_compare_args(samples, out);
+    eprintln!(
+        "bonnetlab demo: comparing the bonnets' recipe runs ({} and {}): calibration, vibration \
+         forcing, attribution",
+        args.runs[0], args.runs[1]
+    );
+    let (runs, settings) = super::compare::parse(&args)?;
+    let recipes = super::compare::recipe_runs(&args)?;
+    let c = compare_with_progress(&runs, &settings, true)?;
+    let opts = crate::pipeline::bonnets::Options {
+        remove: settings.remove.clone(),
+        ..Default::default()
+    };
+    let b = crate::pipeline::bonnets::compare_runs(&recipes, &opts).map_err(|e| CliError {
+        code: e.exit_code,
+        message: e.message,
+    })?;
+    let written = crate::report::compare_report::write_report_full(out, &c, None, Some(&b))
+        .map_err(|e| CliError {
+            code: 2,
+            message: e.to_string(),
+        })?;
+    for p in &written {
+        eprintln!("  wrote {}", p.display());
+    }
+    Ok(match b.difference.first() {
+        Some(d) => {
+            let top = d
+                .causes
+                .first()
+                .map(|c| {
+                    format!(
+                        ", {} {} % of it",
+                        c.cause,
+                        fixed(100.0 * c.share_of_sigma1_difference, 0)
+                    )
+                })
+                .unwrap_or_default();
+            format!(
+                "sigma1 difference {} nm{top}",
+                fixed(d.sigma1_difference_nm, 3)
+            )
+        }
+        None => "no difference computed".into(),
+    })
 }

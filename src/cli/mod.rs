@@ -42,7 +42,8 @@ pub enum Command {
     Compare(compare::Args),
     /// Stats and ripple of many maps as JSON lines, in parallel.
     Batch(batch::Args),
-    /// Generate the bundled two-bonnet sample and write the demo report.
+    /// Run the bundled two-bonnet example (samples/) and write reports/demo.
+    #[command(long_about = demo::ABOUT)]
     Demo(demo::Args),
     /// Solve dwell time for a case file (surface, TIF, clear aperture).
     Dwell(dwell::Args),

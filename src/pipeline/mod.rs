@@ -12,6 +12,7 @@ pub mod calibrate;
 pub mod compare;
 pub mod error;
 pub mod psd;
+pub mod recipe_samples;
 pub mod run_spec;
 pub mod simulate;
 pub mod spots;

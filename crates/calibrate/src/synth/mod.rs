@@ -552,8 +552,58 @@ fn initial_surface(
     })
 }
 
+/// The deposition step of [`generate_with`]: the removal (nm) on `grid` of the true TIF
+/// `field` moved along `motion` (the realised tool motion), with the per-instant `modulation`
+/// of the injected effects (executed offset, rate factor, widening) applied.
+pub trait Deposition {
+    fn deposit(
+        &mut self,
+        motion: &PathLog,
+        field: &dyn bonnetlab_process::tif::RateField,
+        grid: &Grid,
+        modulation: &dyn Fn(&SubStep) -> Modulation,
+    ) -> Result<Array2<f64>, CalibrateError>;
+}
+
+/// The generator's own deposition: the process crate's exact time-domain deposition
+/// ([`deposit_exact_modulated`]) at sub-steps of at most `max_step_mm`.
+pub struct ExactDeposition {
+    pub max_step_mm: f64,
+}
+
+impl Deposition for ExactDeposition {
+    fn deposit(
+        &mut self,
+        motion: &PathLog,
+        field: &dyn bonnetlab_process::tif::RateField,
+        grid: &Grid,
+        modulation: &dyn Fn(&SubStep) -> Modulation,
+    ) -> Result<Array2<f64>, CalibrateError> {
+        let opts = ExactOptions {
+            max_step_mm: Some(self.max_step_mm),
+            ..ExactOptions::default()
+        };
+        deposit_exact_modulated(motion, field, grid, &opts, modulation).map_err(perr)
+    }
+}
+
 /// Generates a run.
 pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
+    generate_with(
+        cfg,
+        &mut ExactDeposition {
+            max_step_mm: cfg.deposit_step_mm,
+        },
+    )
+}
+
+/// [`generate`] with another deposition of the same motion and modulation (for example one
+/// that adds a vibration model's instantaneous TIF); everything else (surface, path, effects,
+/// registration, noise, dropouts, spot) is the same.
+pub fn generate_with(
+    cfg: &SynthConfig,
+    deposition: &mut dyn Deposition,
+) -> Result<SynthRun, CalibrateError> {
     let positive = |v: f64| v.is_finite() && v > 0.0;
     if cfg.rows < 16 || cfg.cols < 16 || !positive(cfg.pixel_mm) || !positive(cfg.pitch_mm) {
         return Err(CalibrateError::InvalidInput(
@@ -700,14 +750,9 @@ pub fn generate(cfg: &SynthConfig) -> Result<SynthRun, CalibrateError> {
     // Exact deposition on the map grid grown so that misregistered samples stay inside.
     let grow = (reach / d).ceil() as usize + 3;
     let rgrid = grid.grown(grow, grow);
-    let opts = ExactOptions {
-        max_step_mm: Some(cfg.deposit_step_mm),
-        ..ExactOptions::default()
-    };
-    let removal = deposit_exact_modulated(&motion, field.as_ref(), &rgrid, &opts, |s| {
+    let removal = deposition.deposit(&motion, field.as_ref(), &rgrid, &|s| {
         ctx.modulation(&cfg.effects, s, &motion)
-    })
-    .map_err(perr)?;
+    })?;
     let removal_at = |x: f64, y: f64| {
         let (u, v) = rgrid.frac_index(x, y);
         bonnetlab_process::interp::catmull_rom(&removal, u, v)

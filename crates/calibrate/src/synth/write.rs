@@ -15,6 +15,24 @@ fn io_err(e: impl std::fmt::Display) -> CalibrateError {
 
 /// Writes the run into `dir` (created if needed); returns the recipe path.
 pub fn write_run(dir: &Path, run: &SynthRun) -> Result<PathBuf, CalibrateError> {
+    let recipe = format!(
+        "# synthetic run written by bonnetlab_calibrate::synth\n\
+         [measurement]\nbefore = \"before.dat\"\nafter = \"after.dat\"\n\n\
+         [tif]\nspot = \"spot.dat\"\ndwell_s = {}\n\n\
+         [path]\nlog = \"path.csv\"\npitch_mm = {}\n\n\
+         [process]\nbonnet = \"original\"\nspindle_rpm = 1000.0\noffset_mm = 0.6\nprecession_deg = 20.0\ninner_pressure_mpa = 0.25\n",
+        run.spot_dwell_s, run.pitch_mm
+    );
+    write_run_with_recipe(dir, run, &recipe)
+}
+
+/// [`write_run`] with the given recipe text (which should name `before.dat`, `after.dat`,
+/// `spot.dat` and `path.csv`).
+pub fn write_run_with_recipe(
+    dir: &Path,
+    run: &SynthRun,
+    recipe: &str,
+) -> Result<PathBuf, CalibrateError> {
     std::fs::create_dir_all(dir).map_err(|e| io_err(format!("{}: {e}", dir.display())))?;
     write_surface(&dir.join("before.dat"), &run.before, MapFormat::MetroProDat).map_err(io_err)?;
     write_surface(&dir.join("after.dat"), &run.after, MapFormat::MetroProDat).map_err(io_err)?;
@@ -30,14 +48,6 @@ pub fn write_run(dir: &Path, run: &SynthRun) -> Result<PathBuf, CalibrateError> 
         ));
     }
     bonnetlab_io::atomic::write_atomic(&dir.join("path.csv"), csv.as_bytes()).map_err(io_err)?;
-    let recipe = format!(
-        "# synthetic run written by bonnetlab_calibrate::synth\n\
-         [measurement]\nbefore = \"before.dat\"\nafter = \"after.dat\"\n\n\
-         [tif]\nspot = \"spot.dat\"\ndwell_s = {}\n\n\
-         [path]\nlog = \"path.csv\"\npitch_mm = {}\n\n\
-         [process]\nbonnet = \"original\"\nspindle_rpm = 1000.0\noffset_mm = 0.6\nprecession_deg = 20.0\ninner_pressure_mpa = 0.25\n",
-        run.spot_dwell_s, run.pitch_mm
-    );
     let rp = dir.join("recipe.toml");
     bonnetlab_io::atomic::write_atomic(&rp, recipe.as_bytes()).map_err(io_err)?;
     Ok(rp)
