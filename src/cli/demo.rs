@@ -18,10 +18,10 @@ use std::path::{Path, PathBuf};
 
 use super::compare::compare_with_progress;
 use super::CliError;
+use crate::pipeline::recipe_samples::{self, RECIPE_SEED};
 use crate::report::compare_report::write_report_with;
 use crate::report::comparison::{RunSpec, Settings};
 use crate::report::msf_prediction::{PredictedMsf, PredictionRun};
-use crate::pipeline::recipe_samples::{self, RECIPE_SEED};
 use crate::report::samples::{
     generate, paper_bonnets, SAMPLE_N, SAMPLE_PITCH_MM, SAMPLE_PIXEL_MM, SAMPLE_SEED,
 };

@@ -61,14 +61,11 @@ pub fn gram(
     (g, rhs)
 }
 
+/// An SVD of a dynamically sized matrix.
+type Svd = nalgebra::SVD<f64, nalgebra::Dyn, nalgebra::Dyn>;
+
 /// The SVD of the equilibrated `g` with its scaling `d`, or `None` when `g` is not finite.
-fn equilibrated_svd(
-    g: &[Vec<f64>],
-) -> Option<(
-    nalgebra::SVD<f64, nalgebra::Dyn, nalgebra::Dyn>,
-    Vec<f64>,
-    f64,
-)> {
+fn equilibrated_svd(g: &[Vec<f64>]) -> Option<(Svd, Vec<f64>, f64)> {
     let n = g.len();
     if g.iter()
         .any(|r| r.len() != n || r.iter().any(|v| !v.is_finite()))
@@ -154,9 +151,9 @@ mod tests {
             vec![0.5, 0.25, 2.0],
         ];
         let inv = inverse(&g).unwrap();
-        for i in 0..3 {
+        for (i, gi) in g.iter().enumerate() {
             for j in 0..3 {
-                let p: f64 = (0..3).map(|k| g[i][k] * inv[k][j]).sum();
+                let p: f64 = gi.iter().zip(&inv).map(|(a, row)| a * row[j]).sum();
                 let e = if i == j { 1.0 } else { 0.0 };
                 assert!((p - e).abs() < 1e-12, "{i} {j}: {p}");
             }
