@@ -247,18 +247,13 @@ fn dwell_case_example_runs() {
     )
     .unwrap();
     let o = bin()
-        .args([
-            "dwell",
-            "samples/dwell_case.toml",
-            "--json",
-            "out/dwell.json",
-        ])
+        .args(["dwell", "samples/dwell_case.toml", "--json", "dwell.json"])
         .current_dir(d)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("out/dwell.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(d.join("dwell.json")).unwrap()).unwrap();
     assert!(v["total_dwell_s"].as_f64().unwrap() > 0.0);
     assert!(v["residual_rms_nm"].as_f64().unwrap() >= 0.0);
 }

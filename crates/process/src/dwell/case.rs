@@ -205,7 +205,8 @@ impl DwellCase {
     }
 
     /// Builds the problem from the case's map: desired removal = surface - min over the CA,
-    /// dwell grid = CA grown by the TIF half-width. Every dwell-grid pixel must be valid.
+    /// dwell grid = CA grown by the TIF half-width. Invalid pixels of the dwell grid (at most
+    /// 10 %) are filled from their valid neighbours and left out of the clear aperture.
     pub fn problem(&self, map: &Surface) -> Result<CaseProblem, ProcessError> {
         let tif = self.sampled_tif()?;
         let (h0, h1) = tif.half_widths();
@@ -221,21 +222,38 @@ impl DwellCase {
         let (dr0, dc0) = (r0 - h0, c0 - h1);
         let (dr1, dc1) = (r1 + h0, c1 + h1);
         let window = s![dr0..dr1, dc0..dc1];
-        if map.valid().slice(window).iter().any(|v| !v) {
+        // Dropouts inside the dwell grid (a measured map always has a few) are filled from
+        // their valid neighbours for the desired removal and left out of the clear aperture,
+        // where the residual is evaluated; beyond MAX_INVALID_FRACTION of the grid the map is
+        // refused.
+        let valid = map.valid().slice(window).to_owned();
+        let invalid = valid.iter().filter(|v| !**v).count();
+        if invalid as f64 > MAX_INVALID_FRACTION * valid.len() as f64 {
             return Err(ProcessError::Processing(format!(
-                "{}: the map has invalid pixels inside the dwell grid",
-                self.file.display()
+                "{}: {invalid} of the dwell grid's {} pixels are invalid in the map (at most {} % may be)",
+                self.file.display(),
+                valid.len(),
+                100.0 * MAX_INVALID_FRACTION
             )));
         }
-        let h = map.heights_nm().slice(window).to_owned();
+        let h =
+            crate::tif::measured::fill_invalid(&map.heights_nm().slice(window).to_owned(), &valid);
         let ca_min = map
             .heights_nm()
             .slice(s![r0..r1, c0..c1])
             .iter()
-            .fold(f64::INFINITY, |m, &v| m.min(v));
+            .zip(map.valid().slice(s![r0..r1, c0..c1]))
+            .filter(|(_, &ok)| ok)
+            .fold(f64::INFINITY, |m, (&v, _)| m.min(v));
+        if !ca_min.is_finite() {
+            return Err(ProcessError::Processing(format!(
+                "{}: the clear aperture has no valid pixel in the map",
+                self.file.display()
+            )));
+        }
         let desired = h.mapv(|v| v - ca_min);
         let aperture = Array2::from_shape_fn(desired.dim(), |(i, j)| {
-            (h0..h0 + (r1 - r0)).contains(&i) && (h1..h1 + (c1 - c0)).contains(&j)
+            valid[(i, j)] && (h0..h0 + (r1 - r0)).contains(&i) && (h1..h1 + (c1 - c0)).contains(&j)
         });
         Ok(CaseProblem {
             problem: DwellProblem::new(desired, aperture, tif)?,
@@ -255,6 +273,10 @@ impl DwellCase {
         }
     }
 }
+
+/// Largest fraction of the dwell grid's pixels that may be invalid in the map (filled from their
+/// neighbours and left out of the residual).
+const MAX_INVALID_FRACTION: f64 = 0.1;
 
 /// Largest clear-aperture row / column index (end exclusive) a case may name.
 const MAX_PIXELS: usize = 1_000_000;
@@ -409,5 +431,51 @@ mod tests {
             "{e}"
         );
         assert!(!e.contains('\n'));
+    }
+
+    /// Dropouts inside the dwell grid: filled from their neighbours for the desired removal (a
+    /// dropout in a plane gets the plane's height), left out of the clear aperture; more than
+    /// 10 % of the grid invalid is refused with the counts.
+    #[test]
+    fn dropouts_in_the_dwell_grid_are_filled_and_left_out_of_the_aperture() {
+        let c = parse(GOOD).unwrap();
+        // A tilted plane, 40 x 50 at 0.5 mm, lowest inside the aperture at (10, 10).
+        let z = Array2::from_shape_fn((40, 50), |(i, j)| 2.0 * i as f64 + 3.0 * j as f64);
+        let mut valid = Array2::from_elem((40, 50), true);
+        for &(i, j) in &[(15, 20), (12, 25), (22, 12), (5, 5)] {
+            valid[(i, j)] = false;
+        }
+        let mut z_bad = z.clone();
+        for ((i, j), v) in valid.indexed_iter() {
+            if !v {
+                z_bad[(i, j)] = 1e6; // garbage where the map has no data
+            }
+        }
+        let map = Surface::with_mask(z_bad, valid.clone(), Some(0.5), Some(0.5)).unwrap();
+        let cp = c.problem(&map).unwrap();
+        let (o0, o1) = cp.offset;
+        let ca_min = 2.0 * 10.0 + 3.0 * 10.0;
+        for &(i, j) in &[(15usize, 20usize), (12, 25), (22, 12)] {
+            let (gi, gj) = (i - o0, j - o1);
+            let d = cp.problem.desired_nm[(gi, gj)];
+            // The mean of the 8 neighbours of a plane is the plane.
+            assert!((d - (z[(i, j)] - ca_min)).abs() < 1e-9, "{i} {j}: {d}");
+            assert!(!cp.problem.aperture[(gi, gj)]);
+        }
+        assert!(cp
+            .problem
+            .desired_nm
+            .iter()
+            .all(|v| v.is_finite() && *v < 1e5));
+        // 10 % of the grid and more: refused, naming the counts.
+        let mut sparse = Array2::from_elem((40, 50), true);
+        for (k, v) in sparse.iter_mut().enumerate() {
+            if k % 5 == 0 {
+                *v = false;
+            }
+        }
+        let map = Surface::with_mask(z, sparse, Some(0.5), Some(0.5)).unwrap();
+        let e = c.problem(&map).unwrap_err().to_string();
+        assert!(e.contains("pixels are invalid in the map"), "{e}");
     }
 }

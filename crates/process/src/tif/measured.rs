@@ -364,7 +364,7 @@ fn background_removed(spot: &Surface, ring_fraction: f64) -> Result<Array2<f64>,
 
 /// Invalid pixels replaced by the mean of their valid 8-neighbours, repeated until none is left
 /// (a dropout inside the footprint becomes a smooth patch, not a hole of zero rate).
-fn fill_invalid(a: &Array2<f64>, valid: &Array2<bool>) -> Array2<f64> {
+pub(crate) fn fill_invalid(a: &Array2<f64>, valid: &Array2<bool>) -> Array2<f64> {
     let mut out = a.clone();
     let mut known = valid.clone();
     let (r, c) = a.dim();
