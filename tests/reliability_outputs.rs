@@ -572,3 +572,72 @@ fn dwell_out_is_published_as_a_set() {
     one_line(&o, "another bonnetlab run");
     assert_eq!(snapshot(&dir), before);
 }
+
+/// `spots --make-sample DIR` and `demo --generate-samples DIR` publish their maps and manifest
+/// (README) as one output set: a run that fails part-way (a directory standing where one map
+/// goes) leaves the previous files as they were, with no staging left, and a held lock refuses
+/// a second run. Before, both wrote file by file: a failure left a mix of two runs' maps.
+#[test]
+fn sample_generators_publish_as_a_set() {
+    let d = tempfile::tempdir().unwrap();
+    // spots --make-sample
+    let dir = d.path().join("spots");
+    let mut c = bin();
+    c.args(["spots", "--make-sample"]).arg(&dir);
+    let o = run(c, Stdio::null());
+    assert!(o.status.success(), "{}", err(&o));
+    let names = listing(&dir);
+    assert!(names.contains(&"manifest.toml".to_string()), "{names:?}");
+    std::fs::remove_file(dir.join("suppression_offset_1.0.dat")).unwrap();
+    std::fs::create_dir(dir.join("suppression_offset_1.0.dat")).unwrap();
+    let before = snapshot(&dir);
+    let mut c = bin();
+    c.args(["spots", "--make-sample"]).arg(&dir);
+    let o = run(c, Stdio::null());
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    one_line(&o, "suppression_offset_1.0.dat");
+    assert_eq!(snapshot(&dir), before, "the previous files were replaced");
+    assert_eq!(listing(&dir), names, "no staging or temporary file left");
+    std::fs::remove_dir(dir.join("suppression_offset_1.0.dat")).unwrap();
+    std::fs::write(
+        dir.join(".bonnetlab.lock"),
+        format!("{}\n", std::process::id()),
+    )
+    .unwrap();
+    let before = snapshot(&dir);
+    let mut c = bin();
+    c.args(["spots", "--make-sample"]).arg(&dir);
+    let o = run(c, Stdio::null());
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    one_line(&o, "another bonnetlab run");
+    assert_eq!(snapshot(&dir), before);
+
+    // demo --generate-samples: maps in sub-directories, the recipe runs and the README.
+    let dir = d.path().join("samples");
+    let mut c = bin();
+    c.args(["demo", "--generate-samples"]).arg(&dir);
+    let o = run(c, Stdio::null());
+    assert!(o.status.success(), "{}", err(&o));
+    let top = listing(&dir);
+    let orig = listing(&dir.join("original"));
+    assert!(
+        orig.contains(&"recipe.toml".to_string()) && orig.contains(&"before_1.dat".to_string()),
+        "{orig:?}"
+    );
+    std::fs::remove_file(dir.join("suppression/after.dat")).unwrap();
+    std::fs::create_dir(dir.join("suppression/after.dat")).unwrap();
+    let (b_top, b_orig) = (snapshot(&dir), snapshot(&dir.join("original")));
+    let mut c = bin();
+    c.args(["demo", "--generate-samples"]).arg(&dir);
+    let o = run(c, Stdio::null());
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    let last = err(&o).lines().last().unwrap_or_default().to_string();
+    assert!(last.contains("after.dat"), "{last}");
+    assert_eq!(snapshot(&dir), b_top, "the previous README was replaced");
+    assert_eq!(
+        snapshot(&dir.join("original")),
+        b_orig,
+        "the previous maps were replaced"
+    );
+    assert_eq!(listing(&dir), top, "no staging or temporary file left");
+}

@@ -300,23 +300,20 @@ fn generate_samples(dir: &Path, seed: u64, repeats: usize) -> Result<(), CliErro
         "bonnetlab demo: generating the two-bonnet sample (seed {seed}) into {}",
         dir.display()
     );
+    // Every file is staged and published together: a failed or concurrent generation never
+    // leaves a mix of two sample sets.
+    let werr = |e: crate::report::write::WriteError| CliError {
+        code: 2,
+        message: e.to_string(),
+    };
+    let mut set = crate::report::write::Set::begin(dir).map_err(werr)?;
     let maps = generate(seed, repeats);
     for m in &maps {
-        let path = dir.join(m.relative_path());
-        if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent).map_err(|e| {
-                CliError::input(parent, format!("cannot create the directory: {e}"))
-            })?;
-        }
-        bonnetlab_io::write_surface(&path, &m.surface, bonnetlab_io::MapFormat::MetroProDat)
-            .map_err(|e| CliError {
-                code: e.exit_code(),
-                message: e.to_string(),
-            })?;
-        eprintln!("  wrote {}", path.display());
+        let name = m.relative_path();
+        set.surface(&name, &m.surface, bonnetlab_io::MapFormat::MetroProDat)
+            .map_err(werr)?;
     }
     for spec in recipe_samples::recipe_runs(RECIPE_SEED) {
-        let d = dir.join(spec.name);
         eprintln!(
             "bonnetlab demo: generating the {} recipe run (exact deposition under the vibration \
              model, seed {})",
@@ -326,18 +323,27 @@ fn generate_samples(dir: &Path, seed: u64, repeats: usize) -> Result<(), CliErro
             code: 1,
             message: format!("demo: {}: {e}", spec.name),
         })?;
-        recipe_samples::write_run(&d, &spec, &run).map_err(|e| CliError {
+        let files = recipe_samples::run_files(&spec, &run).map_err(|e| CliError {
             code: 2,
-            message: format!("{}: {e}", d.display()),
+            message: format!("{}: {e}", dir.join(spec.name).display()),
         })?;
-        eprintln!("  wrote {}", d.join("recipe.toml").display());
+        for (name, bytes) in files {
+            set.bytes(&format!("{}/{name}", spec.name), &bytes)
+                .map_err(werr)?;
+        }
     }
-    crate::report::write::bytes(&dir.join("README.md"), readme(seed, repeats).as_bytes()).map_err(
-        |e| CliError {
-            code: 2,
-            message: e.to_string(),
-        },
-    )?;
+    set.bytes("README.md", readme(seed, repeats).as_bytes())
+        .map_err(werr)?;
+    set.commit().map_err(werr)?;
+    for m in &maps {
+        eprintln!("  wrote {}", dir.join(m.relative_path()).display());
+    }
+    for spec in recipe_samples::recipe_runs(RECIPE_SEED) {
+        eprintln!(
+            "  wrote {}",
+            dir.join(spec.name).join("recipe.toml").display()
+        );
+    }
     Ok(())
 }
 

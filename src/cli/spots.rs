@@ -24,7 +24,7 @@ use super::progress::Bar;
 use super::CliError;
 use crate::pipeline::spots::{manifest_len, sample_sweep, sweep, Sweep};
 use crate::report::{spots, write};
-use bonnetlab_io::{write_surface, MapFormat};
+use bonnetlab_io::MapFormat;
 use bonnetlab_spots::export::model_toml;
 use bonnetlab_spots::{FitStart, SpotAnalysis, SweepReport};
 
@@ -151,19 +151,18 @@ fn write_outputs(
 /// offsets. The suppression bonnet is given a lower Preston coefficient and a softer contact
 /// (an assumption for the sample, not a measured fact).
 fn make_sample(dir: &Path) -> Result<(), CliError> {
-    std::fs::create_dir_all(dir)
-        .map_err(|e| CliError::input(dir, format!("cannot create the directory: {e}")))?;
     let (maps, manifest) = sample_sweep(dir)?;
-    for (file, s) in &maps {
-        write_surface(&dir.join(file), s, MapFormat::MetroProDat).map_err(|e| CliError {
-            code: e.exit_code(),
-            message: e.to_string(),
-        })?;
-    }
-    write::bytes(&dir.join("manifest.toml"), manifest.as_bytes()).map_err(|e| CliError {
+    // The maps and their manifest are published together (never a mix of two runs').
+    let w = |e: write::WriteError| CliError {
         code: 2,
         message: e.to_string(),
-    })?;
+    };
+    let mut set = write::Set::begin(dir).map_err(w)?;
+    for (file, s) in &maps {
+        set.surface(file, s, MapFormat::MetroProDat).map_err(w)?;
+    }
+    set.bytes("manifest.toml", manifest.as_bytes()).map_err(w)?;
+    set.commit().map_err(w)?;
     println!(
         "spots: wrote a sample sweep to {} (manifest.toml and its spot maps)",
         dir.display()

@@ -344,6 +344,14 @@ pub fn write_run(dir: &Path, spec: &RecipeRunSpec, run: &SynthRun) -> Result<(),
     Ok(())
 }
 
+/// The files of a recipe run directory, by name, encoded (see [`write_run`]).
+pub fn run_files(
+    spec: &RecipeRunSpec,
+    run: &SynthRun,
+) -> Result<Vec<(String, Vec<u8>)>, CalibrateError> {
+    bonnetlab_calibrate::synth::write::run_files(run, &recipe_text(spec))
+}
+
 /// An injected effect as a table row: "kind | parameters" (the calibration's names and units).
 pub fn effect_words(e: &Injected) -> String {
     match e {

@@ -1,10 +1,11 @@
 //! Writes a synthetic run as a complete run directory: `before.dat`, `after.dat`, `spot.dat`
 //! (MetroPro, through `bonnetlab_io`), `path.csv` (`t_s,x_mm,y_mm`) and `recipe.toml` in the
-//! format of spec/interfaces.md. Every file is written atomically.
+//! format of spec/interfaces.md. The files are published together as one output set.
 
 use std::path::{Path, PathBuf};
 
-use bonnetlab_io::{write_surface, MapFormat};
+use bonnetlab_io::atomic::OutputSet;
+use bonnetlab_io::{encode_surface, MapFormat};
 
 use super::SynthRun;
 use crate::error::CalibrateError;
@@ -27,18 +28,33 @@ pub fn write_run(dir: &Path, run: &SynthRun) -> Result<PathBuf, CalibrateError> 
 }
 
 /// [`write_run`] with the given recipe text (which should name `before.dat`, `after.dat`,
-/// `spot.dat` and `path.csv`).
+/// `spot.dat` and `path.csv`). The files are published together (an output set: all or none,
+/// never mixed with a concurrent run's).
 pub fn write_run_with_recipe(
     dir: &Path,
     run: &SynthRun,
     recipe: &str,
 ) -> Result<PathBuf, CalibrateError> {
-    std::fs::create_dir_all(dir).map_err(|e| io_err(format!("{}: {e}", dir.display())))?;
-    write_surface(&dir.join("before.dat"), &run.before, MapFormat::MetroProDat).map_err(io_err)?;
-    write_surface(&dir.join("after.dat"), &run.after, MapFormat::MetroProDat).map_err(io_err)?;
+    let mut set = OutputSet::begin(dir).map_err(|e| io_err(format!("{}: {e}", dir.display())))?;
+    for (name, bytes) in run_files(run, recipe)? {
+        set.write(&name, &bytes)
+            .map_err(|e| io_err(format!("{}: {e}", dir.join(&name).display())))?;
+    }
+    set.commit()
+        .map_err(|e| io_err(format!("{}: {e}", dir.display())))?;
+    Ok(dir.join("recipe.toml"))
+}
+
+/// The files of a run directory, by name, encoded: `before.dat`, `after.dat`, `spot.dat`
+/// (MetroPro), `path.csv` and `recipe.toml` (the given text).
+pub fn run_files(run: &SynthRun, recipe: &str) -> Result<Vec<(String, Vec<u8>)>, CalibrateError> {
+    let dat = |name: &str, s: &bonnetlab_surface::Surface| {
+        encode_surface(s, MapFormat::MetroProDat)
+            .map(|b| (name.to_string(), b))
+            .map_err(|e| io_err(format!("{name}: {e}")))
+    };
     let mut spot = run.spot.clone();
     spot.origin_mm = (0.0, 0.0);
-    write_surface(&dir.join("spot.dat"), &spot, MapFormat::MetroProDat).map_err(io_err)?;
     let mut csv = String::with_capacity(run.path.len() * 40 + 16);
     csv.push_str("t_s,x_mm,y_mm\n");
     for k in 0..run.path.len() {
@@ -47,8 +63,11 @@ pub fn write_run_with_recipe(
             run.path.t_s[k], run.path.x_mm[k], run.path.y_mm[k]
         ));
     }
-    bonnetlab_io::atomic::write_atomic(&dir.join("path.csv"), csv.as_bytes()).map_err(io_err)?;
-    let rp = dir.join("recipe.toml");
-    bonnetlab_io::atomic::write_atomic(&rp, recipe.as_bytes()).map_err(io_err)?;
-    Ok(rp)
+    Ok(vec![
+        dat("before.dat", &run.before)?,
+        dat("after.dat", &run.after)?,
+        dat("spot.dat", &spot)?,
+        ("path.csv".into(), csv.into_bytes()),
+        ("recipe.toml".into(), recipe.as_bytes().to_vec()),
+    ])
 }
