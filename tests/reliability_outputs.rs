@@ -417,6 +417,21 @@ fn simulate_and_calibrate_outputs_are_published_as_a_set_under_the_lock() {
     }
 }
 
+/// With a live lock in `dir` (this test process's), the command `c` writing there is refused
+/// with one line, exit 2, and nothing in the directory changes.
+fn held_lock_refuses(dir: &Path, c: Command) {
+    std::fs::write(
+        dir.join(".bonnetlab.lock"),
+        format!("{}\n", std::process::id()),
+    )
+    .unwrap();
+    let before = snapshot(dir);
+    let o = run(c, Stdio::null());
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    one_line(&o, "another bonnetlab run");
+    assert_eq!(snapshot(dir), before);
+}
+
 /// A file's bytes and inode: an output set that is not published leaves both as they were
 /// (the old file-by-file writes replaced each file by rename, a new inode).
 fn snapshot(dir: &Path) -> Vec<(String, u64, Vec<u8>)> {
@@ -491,18 +506,9 @@ fn vibration_out_is_published_as_a_set() {
     assert_eq!(listing(&dir), names, "no staging or temporary file left");
     // A live lock (this test process) refuses a second writer: nothing written.
     std::fs::remove_dir(dir.join("timeseries.csv")).unwrap();
-    std::fs::write(
-        dir.join(".bonnetlab.lock"),
-        format!("{}\n", std::process::id()),
-    )
-    .unwrap();
-    let before = snapshot(&dir);
     let mut c = bin();
     c.arg("vibration").arg(&r2).arg("--out").arg(&dir);
-    let o = run(c, Stdio::null());
-    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
-    one_line(&o, "another bonnetlab run");
-    assert_eq!(snapshot(&dir), before);
+    held_lock_refuses(&dir, c);
 }
 
 /// Issue #18: `dwell --out` is one output set, as `vibration_out_is_published_as_a_set`.
@@ -559,18 +565,9 @@ fn dwell_out_is_published_as_a_set() {
     );
     assert_eq!(listing(&dir), names, "no staging or temporary file left");
     std::fs::remove_dir(dir.join("residual.png")).unwrap();
-    std::fs::write(
-        dir.join(".bonnetlab.lock"),
-        format!("{}\n", std::process::id()),
-    )
-    .unwrap();
-    let before = snapshot(&dir);
     let mut c = bin();
     c.arg("dwell").arg(dwell_case()).arg("--out").arg(&dir);
-    let o = run(c, Stdio::null());
-    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
-    one_line(&o, "another bonnetlab run");
-    assert_eq!(snapshot(&dir), before);
+    held_lock_refuses(&dir, c);
 }
 
 /// `spots --make-sample DIR` and `demo --generate-samples DIR` publish their maps and manifest
@@ -599,18 +596,9 @@ fn sample_generators_publish_as_a_set() {
     assert_eq!(snapshot(&dir), before, "the previous files were replaced");
     assert_eq!(listing(&dir), names, "no staging or temporary file left");
     std::fs::remove_dir(dir.join("suppression_offset_1.0.dat")).unwrap();
-    std::fs::write(
-        dir.join(".bonnetlab.lock"),
-        format!("{}\n", std::process::id()),
-    )
-    .unwrap();
-    let before = snapshot(&dir);
     let mut c = bin();
     c.args(["spots", "--make-sample"]).arg(&dir);
-    let o = run(c, Stdio::null());
-    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
-    one_line(&o, "another bonnetlab run");
-    assert_eq!(snapshot(&dir), before);
+    held_lock_refuses(&dir, c);
 
     // demo --generate-samples: maps in sub-directories, the recipe runs and the README.
     let dir = d.path().join("samples");
