@@ -26,7 +26,7 @@ fn scenario(r: u64, exponent: f64, nb: f64, na: f64, effects: Vec<Injected>) -> 
         },
         truth_oversample: 2,
         tif: TrueTif::bonnet(800.0),
-        pitch_mm: if r % 2 == 0 { 2.0 } else { 3.0 },
+        pitch_mm: if r.is_multiple_of(2) { 2.0 } else { 3.0 },
         feed_min_mm_per_s: 2.0,
         feed_max_mm_per_s: 12.0,
         sample_hz: 10.0,
@@ -42,7 +42,7 @@ fn scenario(r: u64, exponent: f64, nb: f64, na: f64, effects: Vec<Injected>) -> 
         dropout_disc_radius_mm: (0.5, 2.0),
         setup_tilt_nm: 15.0,
         setup_piston_nm: 7.0,
-        aperture_diameter_mm: if r % 2 == 1 { Some(63.0) } else { None },
+        aperture_diameter_mm: (!r.is_multiple_of(2)).then_some(63.0),
         effects,
     }
 }
