@@ -19,10 +19,10 @@ use ndarray::{s, Array2, ArrayView2};
 use rayon::prelude::*;
 
 use crate::error::ProcessError;
-use crate::fft::{fast_len, Convolver, MultiConvolver};
+use crate::fft::{fast_len, Complex, Convolver, MultiConvolver};
 use crate::grid::Grid;
 use crate::path::PathLog;
-use crate::tif::motion::{along_x_at_phase, along_y_at_phase, kernels_from_field};
+use crate::tif::motion::{along_x_at_phase_sized, along_y_at_phase_sized, kernels_from_field};
 use crate::tif::{RateField, Tif};
 
 fn check_weights(path: &PathLog, weights: Option<&[f64]>) -> Result<(), ProcessError> {
@@ -242,11 +242,6 @@ fn splat_cubic_lane(mut lane: ndarray::ArrayViewMut1<f64>, u: f64, w: f64) {
     }
 }
 
-/// Map `k` of `maps`, created (zeros of `dim`) on first use.
-fn map_mut(maps: &mut [Option<Array2<f64>>], k: usize, dim: (usize, usize)) -> &mut Array2<f64> {
-    maps[k].get_or_insert_with(|| Array2::zeros(dim))
-}
-
 /// Adds `w` on row `i` at fractional column `v` with 4 Keys cubic weights along the row only.
 fn splat_cubic_row(d: &mut Array2<f64>, i: isize, v: f64, w: f64) {
     if i >= 0 && (i as usize) < d.nrows() {
@@ -278,13 +273,92 @@ struct LinePhases {
     phase: Vec<f64>,
 }
 
+/// The line phases of the along-X (`kind` 1: sub-row) or along-Y (`kind` 2: sub-column) dwell
+/// of `steps`, or `None` when there are more than [`MAX_PHASES`] or one spreads over more than
+/// 1/32 pixel (a path that wanders rather than a raster).
+fn line_phases(steps: &[SubStep], kind: usize) -> Option<LinePhases> {
+    let mut w_sum = vec![0.0f64; PHASE_BINS];
+    let mut wp_sum = vec![0.0f64; PHASE_BINS];
+    let mut hit = vec![false; PHASE_BINS];
+    let mut any = false;
+    for st in steps {
+        if st.shares[kind] > 0.0 {
+            let (_, f, b) = row_phase(if kind == 1 { st.u } else { st.v });
+            let a = (st.w * st.shares[kind]).abs();
+            hit[b] = true;
+            any = true;
+            w_sum[b] += a;
+            wp_sum[b] += a * f;
+        }
+    }
+    let mut bin_cluster = vec![u8::MAX; PHASE_BINS];
+    let mut phase = Vec::new();
+    if !any {
+        return Some(LinePhases { bin_cluster, phase });
+    }
+    let mut b = 0;
+    while b < PHASE_BINS {
+        if !hit[b] {
+            b += 1;
+            continue;
+        }
+        let start = b;
+        while b < PHASE_BINS && hit[b] {
+            b += 1;
+        }
+        if b - start > MAX_PHASE_SPAN_BINS || phase.len() == MAX_PHASES {
+            return None;
+        }
+        let (w, wp) = (start..b).fold((0.0, 0.0), |(x, y), k| (x + w_sum[k], y + wp_sum[k]));
+        let mean = if w > 0.0 {
+            wp / w
+        } else {
+            (start + b) as f64 / 2.0 / PHASE_BINS as f64
+        };
+        bin_cluster[start..b].fill(phase.len() as u8);
+        phase.push(mean);
+    }
+    Some(LinePhases { bin_cluster, phase })
+}
+
 /// Most distinct line phases given their own kernels (a raster whose pitch is a simple multiple
 /// of the pixel has one or a few); beyond it along-X dwell is splatted cubically across rows.
 const MAX_PHASES: usize = 8;
 /// Fixed phase nodes of the fallback (linear interpolation between their kernels).
 const PHASE_NODES: usize = 8;
-/// Phase kernels kept between calls before the cache is dropped.
-const MAX_CACHED_PHASES: usize = 16;
+/// Fewest phase kernels kept between calls (at least the most one call can use: both motions
+/// at [`PHASE_NODES`] nodes); beyond it the least recently used is replaced.
+const MIN_CACHED_PHASES: usize = 2 * PHASE_NODES;
+/// Most phase kernels kept, and the memory their spectra may take (bytes), whichever is less
+/// (but at least [`MIN_CACHED_PHASES`]).
+const MAX_CACHED_PHASES: usize = 48;
+const PHASE_CACHE_BYTES: usize = 16 << 20;
+/// Zeroed dwell maps kept for reuse between calls (fresh grown-grid maps cost page faults and
+/// a memset per call).
+const MAX_POOLED_MAPS: usize = 8;
+
+/// One sub-step of the path on the grown grid: fractional row / column, dwell (s, times the
+/// rate weight) and its shares `[resting, along X, along Y]`.
+#[derive(Debug, Clone, Copy)]
+struct SubStep {
+    u: f64,
+    v: f64,
+    w: f64,
+    shares: [f64; 3],
+}
+
+/// A cached line-phase kernel.
+#[derive(Debug, Clone, Copy)]
+struct PhaseKernel {
+    /// Motion kind: 1 along X, 2 along Y.
+    kind: usize,
+    /// Phase in 1 / 2^20 pixel.
+    q: u32,
+    /// Kernel index in the convolver.
+    idx: usize,
+    /// Call counter when last used.
+    used: u64,
+}
 
 /// Fast removal workspace for one map grid and one TIF: FFT plans, the spectra of the TIF's
 /// motion kernels (point samples for a resting tool, one-pixel averages along X and along Y for
@@ -297,9 +371,20 @@ pub struct FastRemoval {
     h: (usize, usize),
     conv: MultiConvolver,
     field: Box<dyn RateField + Send>,
-    /// Cached line-phase kernels: (motion kind 1 = along X / 2 = along Y, phase in 1 / 2^20
-    /// pixel, kernel index in `conv`).
-    phases: Vec<(usize, u32, usize)>,
+    /// Half-widths of the field's point-sampled kernel.
+    half: (usize, usize),
+    /// Cached line-phase kernels (least recently used replaced first).
+    phases: Vec<PhaseKernel>,
+    /// Phase kernels kept at most.
+    max_phases: usize,
+    /// Calls so far (the phase cache's clock).
+    calls: u64,
+    /// Phase kernels built so far.
+    phase_builds: usize,
+    /// The current path's sub-steps (reused buffer: the path is walked once per call).
+    steps: Vec<SubStep>,
+    /// Zeroed dwell maps of the grown grid, for reuse.
+    pool: Vec<Array2<f64>>,
 }
 
 impl std::fmt::Debug for FastRemoval {
@@ -351,14 +436,29 @@ impl FastRemoval {
             fast_len(ext.rows),
             fast_len(ext.cols),
         );
+        let spectrum_bytes = conv.fft().spectrum_len() * std::mem::size_of::<Complex<f64>>();
+        let max_phases = (PHASE_CACHE_BYTES / spectrum_bytes.max(1))
+            .clamp(MIN_CACHED_PHASES, MAX_CACHED_PHASES.max(MIN_CACHED_PHASES));
         Ok(FastRemoval {
             grid: *grid,
             ext,
             h: (h0, h1),
             conv,
             field,
+            half: (p0, p1),
             phases: Vec::new(),
+            max_phases,
+            calls: 0,
+            phase_builds: 0,
+            steps: Vec::new(),
+            pool: Vec::new(),
         })
+    }
+
+    /// Line-phase kernels built so far (each one a field sampling and a forward transform; a
+    /// kernel is built once and kept while it is used).
+    pub fn phase_kernel_builds(&self) -> usize {
+        self.phase_builds
     }
 
     /// The map grid grown by the largest kernel half-width: where dwell can affect the map.
@@ -392,101 +492,79 @@ impl FastRemoval {
             .to_owned()
     }
 
-    /// The line phases of the along-X (`kind` 1: sub-row) or along-Y (`kind` 2: sub-column)
-    /// dwell, or `None` when there are more than [`MAX_PHASES`] or one spreads over more than
-    /// 1/32 pixel (a path that wanders rather than a raster).
-    fn line_phases(
-        &self,
-        path: &PathLog,
-        weights: Option<&[f64]>,
-        kind: usize,
-    ) -> Option<LinePhases> {
-        let mut w_sum = vec![0.0f64; PHASE_BINS];
-        let mut wp_sum = vec![0.0f64; PHASE_BINS];
-        let mut hit = vec![false; PHASE_BINS];
-        let mut any = false;
-        for_each_motion_substep(path, weights, &self.ext, |u, v, w, shares| {
-            if shares[kind] > 0.0 {
-                let (_, f, b) = row_phase(if kind == 1 { u } else { v });
-                let a = (w * shares[kind]).abs();
-                hit[b] = true;
-                any = true;
-                w_sum[b] += a;
-                wp_sum[b] += a * f;
-            }
-        });
-        let mut bin_cluster = vec![u8::MAX; PHASE_BINS];
-        let mut phase = Vec::new();
-        if !any {
-            return Some(LinePhases { bin_cluster, phase });
-        }
-        let mut b = 0;
-        while b < PHASE_BINS {
-            if !hit[b] {
-                b += 1;
-                continue;
-            }
-            let start = b;
-            while b < PHASE_BINS && hit[b] {
-                b += 1;
-            }
-            if b - start > MAX_PHASE_SPAN_BINS || phase.len() == MAX_PHASES {
-                return None;
-            }
-            let (w, wp) = (start..b).fold((0.0, 0.0), |(x, y), k| (x + w_sum[k], y + wp_sum[k]));
-            let mean = if w > 0.0 {
-                wp / w
-            } else {
-                (start + b) as f64 / 2.0 / PHASE_BINS as f64
-            };
-            bin_cluster[start..b].fill(phase.len() as u8);
-            phase.push(mean);
-        }
-        Some(LinePhases { bin_cluster, phase })
-    }
-
-    /// Kernel index for dwell of motion `kind` (1 along X, 2 along Y) at sub-pixel phase
-    /// `phase` across the motion (built and cached on first use; phase 0 is the centred
-    /// kernel of that motion).
-    fn phase_kernel(&mut self, kind: usize, phase: f64) -> Result<usize, ProcessError> {
-        let q = (phase * PHASE_KEY_STEPS).round() as u32;
+    /// Kernel index for dwell of motion `kind` (1 along X, 2 along Y) at sub-pixel phase key
+    /// `q` (in 1 / 2^20 pixel) across the motion, built on first use (phase 0 is the centred
+    /// kernel of that motion). A new kernel takes a free place in the cache, or replaces the
+    /// least recently used one not used in this call.
+    fn phase_kernel(&mut self, kind: usize, q: u32) -> Result<usize, ProcessError> {
         if q == 0 {
             return Ok(kind);
         }
-        if let Some(&(_, _, k)) = self.phases.iter().find(|(c, p, _)| *c == kind && *p == q) {
-            return Ok(k);
+        let now = self.calls;
+        if let Some(e) = self.phases.iter_mut().find(|e| e.kind == kind && e.q == q) {
+            e.used = now;
+            return Ok(e.idx);
         }
         let (f, dx, dy) = (self.field.as_ref(), self.grid.dx_mm, self.grid.dy_mm);
         let ph = q as f64 / PHASE_KEY_STEPS;
         let t = if kind == 1 {
-            along_x_at_phase(f, dx, dy, ph)?
+            along_x_at_phase_sized(f, dx, dy, ph, self.half)?
         } else {
-            along_y_at_phase(f, dx, dy, ph)?
+            along_y_at_phase_sized(f, dx, dy, ph, self.half)?
         };
-        let k = self.conv.push_kernel(t.rate_nm_per_s.view());
-        self.phases.push((kind, q, k));
-        Ok(k)
+        self.phase_builds += 1;
+        let stale = self
+            .phases
+            .iter()
+            .enumerate()
+            .filter(|(_, e)| e.used < now)
+            .min_by_key(|(_, e)| e.used)
+            .map(|(n, _)| n);
+        match stale {
+            Some(n) if self.phases.len() >= self.max_phases => {
+                let idx = self.phases[n].idx;
+                self.conv.set_kernel(idx, t.rate_nm_per_s.view());
+                self.phases[n] = PhaseKernel {
+                    kind,
+                    q,
+                    idx,
+                    used: now,
+                };
+                Ok(idx)
+            }
+            _ => {
+                let idx = self.conv.push_kernel(t.rate_nm_per_s.view());
+                self.phases.push(PhaseKernel {
+                    kind,
+                    q,
+                    idx,
+                    used: now,
+                });
+                Ok(idx)
+            }
+        }
     }
 
-    /// Kernel indices for the phases of each motion kind; the cache is dropped first when they
-    /// would not fit in it (so no index handed out here is invalidated).
+    /// Kernel indices for the phases of each motion kind (no index handed out here is
+    /// replaced within the same call).
     fn phase_kernels(&mut self, wanted: [&[f64]; 2]) -> Result<[Vec<usize>; 2], ProcessError> {
-        let mut missing = 0;
+        self.calls += 1;
+        let key = |f: f64| (f * PHASE_KEY_STEPS).round() as u32;
+        // Mark the kernels this call uses first, so building a missing one never replaces them.
+        let now = self.calls;
         for (kind, phases) in [(1, wanted[0]), (2, wanted[1])] {
-            missing += phases
-                .iter()
-                .filter(|&&f| {
-                    let q = (f * PHASE_KEY_STEPS).round() as u32;
-                    q != 0 && !self.phases.iter().any(|(c, p, _)| *c == kind && *p == q)
-                })
-                .count();
-        }
-        if self.phases.len() + missing > MAX_CACHED_PHASES {
-            self.phases.clear();
-            self.conv.truncate_kernels(3);
+            for &f in phases {
+                let q = key(f);
+                if let Some(e) = self.phases.iter_mut().find(|e| e.kind == kind && e.q == q) {
+                    e.used = now;
+                }
+            }
         }
         let mut get = |kind: usize, phases: &[f64]| -> Result<Vec<usize>, ProcessError> {
-            phases.iter().map(|&f| self.phase_kernel(kind, f)).collect()
+            phases
+                .iter()
+                .map(|&f| self.phase_kernel(kind, key(f)))
+                .collect()
         };
         let x = get(1, wanted[0])?;
         let y = get(2, wanted[1])?;
@@ -500,23 +578,40 @@ impl FastRemoval {
         weights: Option<&[f64]>,
     ) -> Result<Array2<f64>, ProcessError> {
         check_weights(path, weights)?;
+        // The path is walked once; its sub-steps are kept for the line phases and the splat.
+        let mut steps = std::mem::take(&mut self.steps);
+        steps.clear();
+        for_each_motion_substep(path, weights, &self.ext, |u, v, w, shares| {
+            steps.push(SubStep { u, v, w, shares })
+        });
+        let out = self.removal_of_steps(&steps);
+        self.steps = steps;
+        out
+    }
+
+    fn removal_of_steps(&mut self, steps: &[SubStep]) -> Result<Array2<f64>, ProcessError> {
         // Dwell moving along X (Y) goes to its row (column) with the kernel of its line's
         // sub-row (sub-column) phase; when a path has too many line phases, or they spread,
         // it is shared linearly between kernels at the fixed phases j / PHASE_NODES instead.
         let nodes: Vec<f64> = (0..PHASE_NODES)
             .map(|j| j as f64 / PHASE_NODES as f64)
             .collect();
-        let px = self.line_phases(path, weights, 1);
-        let py = self.line_phases(path, weights, 2);
+        let px = line_phases(steps, 1);
+        let py = line_phases(steps, 2);
         let [sx, sy] = self.phase_kernels([
             px.as_ref().map_or(&nodes[..], |l| &l.phase[..]),
             py.as_ref().map_or(&nodes[..], |l| &l.phase[..]),
         ])?;
         let (rows, cols) = (self.ext.rows, self.ext.cols);
         let mut maps: Vec<Option<Array2<f64>>> = vec![None; self.conv.kernel_count()];
-        for_each_motion_substep(path, weights, &self.ext, |u, v, w, shares| {
+        let pool = &mut self.pool;
+        for st in steps {
+            let (u, v, w, shares) = (st.u, st.v, st.w, st.shares);
             if shares[0] > 0.0 {
-                splat_cubic(map_mut(&mut maps, 0, (rows, cols)), u, v, w * shares[0]);
+                let d = maps[0].get_or_insert_with(|| {
+                    pool.pop().unwrap_or_else(|| Array2::zeros((rows, cols)))
+                });
+                splat_cubic(d, u, v, w * shares[0]);
             }
             for (kind, phases, slot) in [(1, &px, &sx), (2, &py, &sy)] {
                 let share = shares[kind];
@@ -526,8 +621,10 @@ impl FastRemoval {
                 // Across the motion: `n` whole pixels plus phase `f`; along it: `along`.
                 let (across, along) = if kind == 1 { (u, v) } else { (v, u) };
                 let (n, f, b) = row_phase(across);
-                let put = |maps: &mut Vec<Option<Array2<f64>>>, k: usize, n: isize, w: f64| {
-                    let d = map_mut(maps, k, (rows, cols));
+                let mut put = |maps: &mut Vec<Option<Array2<f64>>>, k: usize, n: isize, w: f64| {
+                    let d = maps[k].get_or_insert_with(|| {
+                        pool.pop().unwrap_or_else(|| Array2::zeros((rows, cols)))
+                    });
                     if kind == 1 {
                         splat_cubic_row(d, n, along, w);
                     } else {
@@ -555,10 +652,17 @@ impl FastRemoval {
                     }
                 }
             }
-        });
+        }
         let views: Vec<Option<ArrayView2<f64>>> =
             maps.iter().map(|m| m.as_ref().map(|a| a.view())).collect();
         let full = self.conv.apply_sum(&views);
+        // Back to the pool, zeroed.
+        for mut m in maps.into_iter().flatten() {
+            if self.pool.len() < MAX_POOLED_MAPS {
+                m.fill(0.0);
+                self.pool.push(m);
+            }
+        }
         Ok(self.crop(&full))
     }
 }
@@ -902,6 +1006,44 @@ mod tests {
             d < 0.002 * rms_y,
             "along Y: diff {d} vs removal rms {rms_y}"
         );
+    }
+
+    #[test]
+    fn phase_kernels_are_kept_across_paths_and_calls() {
+        // Two rasters whose line phases differ (1.7 mm pitch: five sub-row phases; 1.55 mm:
+        // the fixed phase nodes) through one workspace, alternately: the kernels are built in
+        // the first round only, and every result is the one a fresh workspace gives.
+        let grid = Grid::new(40, 50, 0.5, 0.5, 0.0, 0.0).unwrap();
+        let g = GaussianTif::new(2.0, 12.0, 3.0).unwrap();
+        let lim = crate::path::kinematics::Limits::default();
+        let dgrid = grid.grown(16, 16);
+        let dens = Array2::from_elem((dgrid.rows, dgrid.cols), 0.3);
+        let paths: Vec<PathLog> = [1.7, 1.55]
+            .iter()
+            .map(|&pitch| {
+                let r = RasterSpec::over_rect((-6.0, 31.0), (-6.0, 26.0), pitch, 2.0);
+                crate::path::kinematics::dwell_raster(&r, &dens, &dgrid, &lim, 0.2)
+                    .unwrap()
+                    .0
+            })
+            .collect();
+        let mut fast = FastRemoval::from_field(&g, &grid).unwrap();
+        let mut builds = Vec::new();
+        for round in 0..3 {
+            for p in &paths {
+                let got = fast.removal(p, None).unwrap();
+                let want = FastRemoval::from_field(&g, &grid)
+                    .unwrap()
+                    .removal(p, None)
+                    .unwrap();
+                let peak = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let d = (&got - &want).iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                assert!(d <= 1e-12 * peak, "round {round}: {d} vs {peak}");
+            }
+            builds.push(fast.phase_kernel_builds());
+        }
+        assert!(builds[0] > 5, "{builds:?}");
+        assert_eq!(builds[0], builds[2], "{builds:?}");
     }
 
     #[test]

@@ -66,8 +66,13 @@ impl Tif {
         })
     }
 
-    /// Samples a rate field on a grid of pixel (dx, dy), covering its footprint.
-    pub fn sample(field: &dyn RateField, dx_mm: f64, dy_mm: f64) -> Result<Tif, ProcessError> {
+    /// Half-widths (rows, columns) of [`Tif::sample`] of `field` at pixel (dx, dy), without
+    /// sampling it.
+    pub fn sample_half_widths(
+        field: &dyn RateField,
+        dx_mm: f64,
+        dy_mm: f64,
+    ) -> Result<(usize, usize), ProcessError> {
         if !(dx_mm.is_finite() && dx_mm > 0.0 && dy_mm.is_finite() && dy_mm > 0.0) {
             return Err(ProcessError::invalid("TIF pixel size must be positive"));
         }
@@ -79,6 +84,12 @@ impl Tif {
                 "TIF footprint is too large for its pixel size",
             ));
         }
+        Ok((h0, h1))
+    }
+
+    /// Samples a rate field on a grid of pixel (dx, dy), covering its footprint.
+    pub fn sample(field: &dyn RateField, dx_mm: f64, dy_mm: f64) -> Result<Tif, ProcessError> {
+        let (h0, h1) = Tif::sample_half_widths(field, dx_mm, dy_mm)?;
         let rate = Array2::from_shape_fn((2 * h0 + 1, 2 * h1 + 1), |(i, j)| {
             field.rate_at_mm(
                 (j as f64 - h1 as f64) * dx_mm,

@@ -63,8 +63,19 @@ pub fn along_x_at_phase(
     dy_mm: f64,
     phase: f64,
 ) -> Result<Tif, ProcessError> {
-    let point = Tif::sample(field, dx_mm, dy_mm)?;
-    let (h0, h1) = point.half_widths();
+    let half = Tif::sample_half_widths(field, dx_mm, dy_mm)?;
+    along_x_at_phase_sized(field, dx_mm, dy_mm, phase, half)
+}
+
+/// [`along_x_at_phase`] given the half-widths `(h0, h1)` of the field's point-sampled kernel
+/// ([`Tif::sample_half_widths`]), for callers that build many phases.
+pub fn along_x_at_phase_sized(
+    field: &dyn RateField,
+    dx_mm: f64,
+    dy_mm: f64,
+    phase: f64,
+    (h0, h1): (usize, usize),
+) -> Result<Tif, ProcessError> {
     // Two rows more: the footprint shifted by up to a row still fits.
     box_kernel(field, dx_mm, dy_mm, true, (h0 + 2, h1 + 1), phase)
 }
@@ -78,8 +89,18 @@ pub fn along_y_at_phase(
     dy_mm: f64,
     phase: f64,
 ) -> Result<Tif, ProcessError> {
-    let point = Tif::sample(field, dx_mm, dy_mm)?;
-    let (h0, h1) = point.half_widths();
+    let half = Tif::sample_half_widths(field, dx_mm, dy_mm)?;
+    along_y_at_phase_sized(field, dx_mm, dy_mm, phase, half)
+}
+
+/// [`along_y_at_phase`] given the half-widths of the field's point-sampled kernel.
+pub fn along_y_at_phase_sized(
+    field: &dyn RateField,
+    dx_mm: f64,
+    dy_mm: f64,
+    phase: f64,
+    (h0, h1): (usize, usize),
+) -> Result<Tif, ProcessError> {
     box_kernel(field, dx_mm, dy_mm, false, (h0 + 1, h1 + 2), phase)
 }
 
