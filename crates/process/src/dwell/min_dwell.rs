@@ -493,6 +493,7 @@ fn heal_with(
 /// total dwell (the zero frequency of T is set, not solved: on the CA a uniform dwell is a
 /// piston, which P removes, so the data never fixes it). Per iteration four real FFTs, as
 /// FISTA: forward of R - A and of U - C, inverse of T and of B T. Returns U (feasible).
+#[allow(clippy::too_many_arguments)]
 fn heal_admm(
     p: &DwellProblem,
     conv: &mut Convolver,
