@@ -1,5 +1,6 @@
 //! Process benchmarks (criterion): dwell solving on the two public cases (issue targets: case A
-//! <= 0.05 s, case B <= 0.1 s; issue #20: the minimum-dwell point solve <= 0.1 s, with its
+//! <= 0.05 s, case B <= 0.1 s; issue #20: the minimum-dwell point solve <= 0.1 s, FISTA and ADMM
+//! healers side by side, with its
 //! residual, total dwell and realised residual printed beside the reference figures) and the fast removal of a 100 x 100 mm run at 0.1 mm pixels over
 //! a 60-minute raster (target <= 2 s). `removal_scaling` varies the path duration (15 to 120 min
 //! at 0.1 mm pixels, by feed and by repeated passes) and the map pixel (0.2 / 0.05 mm at 60 min),
@@ -11,7 +12,7 @@ use std::time::Duration;
 
 use bonnetlab::process::dwell::feed::realise;
 use bonnetlab::process::dwell::{
-    solve_iterative, solve_rifta, DwellCase, DwellTarget, IterativeOptions, MinDwell,
+    solve_iterative, solve_rifta, DwellCase, DwellTarget, Healer, IterativeOptions, MinDwell,
     MinDwellOptions, RiftaOptions,
 };
 use bonnetlab::process::path::kinematics::{dwell_raster, Limits};
@@ -39,35 +40,41 @@ fn thread_cpu_s() -> f64 {
         .map_or(f64::NAN, |ns| ns * 1e-9)
 }
 
-/// Issue #20: the minimum-dwell point at the issue's dwell budget (A 655 min at 300 iterations,
-/// B 66 min at 600), timed as one solve (shared start + healing + evaluation); the sweep that
-/// chose its offset is printed, not timed. Side by side in the same run: the fine dwell grid
-/// (default) and the coarse dwell grid (cubic B-spline nodes every 5 pixels, case B only: on
-/// case A the TIF is under 3 pixels wide and the grid stays fine). The median CPU time of 5
-/// solves is printed beside criterion's wall time.
+/// Issue #20: the minimum-dwell point at the issue's dwell budget (A 655 min, B 66 min), timed
+/// as one solve (shared start + healing + evaluation); the sweep that chose its offset is
+/// printed, not timed. Side by side in the same run: the FISTA healer as it was the default
+/// before (A 300 iterations, B 600, fine grid) and the ADMM healer (A: fine grid, 80
+/// iterations, the default; B: coarse dwell grid s = 5, 300 coarse iterations, no defect
+/// correction, 20 fine iterations). The median thread CPU time of 5 solves is printed
+/// beside criterion's wall time.
 fn min_dwell(c: &mut Criterion) {
     let mut g = c.benchmark_group("dwell_min");
     g.sample_size(10).measurement_time(Duration::from_secs(3));
-    let fine = MinDwellOptions::default();
-    let coarse = MinDwellOptions {
-        max_coarsening: 5,
-        corrections: 0,
+    let fista = |iterations| MinDwellOptions {
+        iterations,
+        healer: Healer::Fista,
         ..MinDwellOptions::default()
     };
-    for (name, label, iterations, budget_min, variants) in [
+    let admm_fine = MinDwellOptions::default();
+    let admm_coarse = MinDwellOptions {
+        iterations: 300,
+        max_coarsening: 5,
+        corrections: 0,
+        fine_iterations: 20,
+        ..MinDwellOptions::default()
+    };
+    for (name, label, budget_min, variants) in [
         (
             "rifta_case_a.toml",
             "case_a",
-            300,
             655.0,
-            &[("fine", fine)][..],
+            [("fista300", fista(300)), ("admm_fine80", admm_fine)],
         ),
         (
             "ibfest_case_b.toml",
             "case_b",
-            600,
             66.0,
-            &[("fine", fine), ("coarse5", coarse)][..],
+            [("fista600", fista(600)), ("admm_coarse5", admm_coarse)],
         ),
     ] {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -77,8 +84,8 @@ fn min_dwell(c: &mut Criterion) {
         let map = bonnetlab::io::read_surface(&case.surface).expect("case map");
         let cp = case.problem(&map).expect("case problem");
         let p = &cp.problem;
-        for &(variant, base) in variants {
-            let o = MinDwellOptions { iterations, ..base };
+        for (variant, o) in variants {
+            let iterations = o.iterations;
             let mut md = MinDwell::new(p, &o).expect("start");
             let (s, curve) = md
                 .pick(DwellTarget::MaxDwell {

@@ -147,18 +147,19 @@ fn reference(c: &DwellCase, entry: &str) -> (f64, f64) {
     ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
 )]
 fn min_dwell_beats_every_reference_on_both_axes() {
-    // Case A at the default iterations; case B needs more healing to reach its noise floor.
+    // Case A at the default (ADMM) iterations; case B needs more healing to reach its noise
+    // floor (`dwell --iterations 300`).
     for (name, iterations, target_nm, budget_min, refs) in [
         (
             "rifta_case_a.toml",
-            300,
+            MinDwellOptions::default().iterations,
             0.08,
             655.0,
             &["rifta_repo_script", "richardson_lucy_200"][..],
         ),
         (
             "ibfest_case_b.toml",
-            600,
+            300,
             0.30,
             66.0,
             &["rifta_two_level", "richardson_lucy_200"][..],
@@ -257,22 +258,23 @@ fn realised_feed_matches_exact_deposition_of_the_schedule() {
     }
 }
 
-/// The optional coarse dwell grid (cubic B-spline nodes every 5 pixels) on case B: a
-/// non-negative map on the fine grid whose figures are the public evaluation of that map, within
-/// the 66 min budget and within 0.5 % of the fine solver's residual (0.2997 nm). It does not reach
-/// the 0.30 nm target (0.3009 nm measured), which is why it is not the default; this guards what it
-/// does reach (the bilinear grid with tent-averaged targets gave 0.306 nm).
+/// The coarse dwell grid (cubic B-spline nodes every 5 pixels) on case B, healed by ADMM (300
+/// coarse iterations, then 20 on the fine grid: the configuration the bench times at < 0.1 s
+/// CPU): a non-negative map on the fine grid whose figures are the public evaluation of that
+/// map, meeting the 0.30 nm within 66 min (0.2997 nm at 54 min measured; with FISTA
+/// the same grid stayed at 0.3009 nm).
 #[test]
 #[cfg_attr(
     no_shared_data,
     ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
 )]
-fn coarse_grid_on_case_b_stays_near_the_fine_residual() {
+fn coarse_grid_with_admm_meets_case_b_targets() {
     let (_, p) = load("ibfest_case_b.toml");
     let o = MinDwellOptions {
-        iterations: 600,
+        iterations: 300,
         max_coarsening: 5,
         corrections: 0,
+        fine_iterations: 20,
         ..MinDwellOptions::default()
     };
     let mut md = MinDwell::new(&p.problem, &o).unwrap();
@@ -283,7 +285,7 @@ fn coarse_grid_on_case_b_stays_near_the_fine_residual() {
     assert!((e.residual_rms_nm - s.residual_rms_nm).abs() < 1e-12);
     let min = s.total_dwell_s / 60.0;
     assert!(
-        min <= 66.0 && s.residual_rms_nm <= 0.2997 * 1.005,
+        min <= 66.0 && s.residual_rms_nm <= 0.30,
         "{} nm with {min} min",
         s.residual_rms_nm
     );

@@ -62,7 +62,7 @@ pub struct Args {
     /// min-dwell: least residual with total dwell <= this (min).
     #[arg(long)]
     pub max_dwell_min: Option<f64>,
-    /// min-dwell: projected-gradient iterations per trade-off point (more: lower residual at
+    /// min-dwell: healing (ADMM) iterations per trade-off point (more: lower residual at
     /// the same total dwell, slower).
     #[arg(long, default_value_t = MinDwellOptions::default().iterations)]
     pub iterations: usize,

@@ -33,7 +33,7 @@ use crate::tif::Tif;
 
 pub use case::DwellCase;
 pub use iterative::{solve_iterative, IterativeOptions};
-pub use min_dwell::{DwellTarget, MinDwell, MinDwellOptions};
+pub use min_dwell::{DwellTarget, Healer, MinDwell, MinDwellOptions};
 pub use rifta::{solve_rifta, RiftaOptions};
 
 /// A dwell problem on the dwell grid.
