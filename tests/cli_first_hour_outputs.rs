@@ -225,7 +225,11 @@ fn unwritable_output_is_exit_2_one_line_everywhere() {
             lines[0].starts_with(&format!("bonnetlab: {name}: cannot write: ")),
             "{args:?}: {e}"
         );
-        assert_eq!(e.matches(&name).count(), 1, "{args:?} names the file twice: {e}");
+        assert_eq!(
+            e.matches(&name).count(),
+            1,
+            "{args:?} names the file twice: {e}"
+        );
         assert!(!e.contains("os error"), "{args:?}: {e}");
         assert!(o.stdout.is_empty(), "{args:?}: stdout {:?}", o.stdout);
     }

@@ -209,7 +209,11 @@ fn written_line(wrote: &[String], outs: &[BonnetOut]) -> String {
             )
         })
         .collect();
-    format!("vibration: wrote {}: {}", wrote.join(" and "), per.join(", "))
+    format!(
+        "vibration: wrote {}: {}",
+        wrote.join(" and "),
+        per.join(", ")
+    )
 }
 
 fn summary(p: &VibrationParams, outs: &[BonnetOut]) -> String {
