@@ -261,3 +261,68 @@ fn bad_input_is_one_line_naming_the_file() {
         "{v}"
     );
 }
+
+/// Issue #17: `psd --limit` reported PASS but never drew the limit line. The SVG now holds the
+/// limit as a black dashed series (short 2 px black segments, absent without `--limit`) that
+/// falls from left to right as A f^-B does, with its label in the legend.
+#[test]
+fn plot_draws_the_limit_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = noise_map(dir.path());
+    let fs = f.to_str().unwrap();
+    let black_segments = |svg: &str| -> Vec<Vec<(f64, f64)>> {
+        svg.split("<polyline")
+            .skip(1)
+            .filter(|p| {
+                let head = &p[..p.find("/>").unwrap_or(p.len())];
+                head.contains("stroke=\"#000000\"") && head.contains("stroke-width=\"2\"")
+            })
+            .map(|p| {
+                let i = p.find("points=\"").unwrap() + 8;
+                let pts = &p[i..i + p[i..].find('"').unwrap()];
+                pts.split_whitespace()
+                    .map(|xy| {
+                        let (x, y) = xy.split_once(',').unwrap();
+                        (x.parse().unwrap(), y.parse().unwrap())
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let with = dir.path().join("with.svg");
+    let without = dir.path().join("without.svg");
+    let out = bonnetlab(&[
+        "psd",
+        fs,
+        "--limit",
+        "10,1",
+        "--plot",
+        with.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = bonnetlab(&["psd", fs, "--plot", without.to_str().unwrap()]);
+    assert!(out.status.success());
+    let (w, wo) = (
+        std::fs::read_to_string(&with).unwrap(),
+        std::fs::read_to_string(&without).unwrap(),
+    );
+    assert!(
+        black_segments(&wo).is_empty(),
+        "a limit line without --limit"
+    );
+    assert!(w.contains("limit 10 f^-1 (one-sided)"), "no legend entry");
+    let segs = black_segments(&w);
+    assert!(segs.len() >= 10, "{} dashes", segs.len());
+    // Dashes: gaps between them, and the line goes down (SVG y grows downwards) to the right.
+    let pts: Vec<(f64, f64)> = segs.iter().flatten().copied().collect();
+    let (first, last) = (pts[0], *pts.last().unwrap());
+    assert!(
+        last.0 > first.0 + 100.0 && last.1 > first.1 + 20.0,
+        "{first:?} {last:?}"
+    );
+    assert!(segs.windows(2).any(|s| s[1][0] != *s[0].last().unwrap()));
+}

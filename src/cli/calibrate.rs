@@ -27,7 +27,7 @@ pub struct Args {
 }
 
 pub fn run(args: &Args) -> Result<(), CliError> {
-    let bar = spinner();
+    let bar = super::progress::spinner("calibrate");
     bar.set_message(format!("reading the run of {}", args.recipe.display()));
     let problem = load(&args.recipe)?;
     bar.set_message("calibrating (baseline fit, candidate effects, hold-out tests)");
@@ -38,7 +38,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         + "\n";
     if let Some(dir) = &args.out {
         // calibration.json and report.html are published together or not at all.
-        let werr = |e: crate::report::write::WriteError| CliError::input(&e.file, e.what);
+        let werr = super::write_error;
         let mut set = crate::report::write::Set::begin(dir).map_err(werr)?;
         set.bytes("calibration.json", text.as_bytes())
             .map_err(werr)?;
@@ -61,23 +61,6 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         super::println_stdout(&summary(&cal, &written(args)))?;
     }
     Ok(())
-}
-
-/// A spinner on stderr while the run loads and calibrates (a terminal only).
-fn spinner() -> indicatif::ProgressBar {
-    use std::io::IsTerminal;
-    let target = if std::io::stderr().is_terminal() {
-        indicatif::ProgressDrawTarget::stderr()
-    } else {
-        indicatif::ProgressDrawTarget::hidden()
-    };
-    let bar = indicatif::ProgressBar::with_draw_target(None, target);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{spinner} calibrate {elapsed} {msg}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
-    );
-    bar.enable_steady_tick(std::time::Duration::from_millis(120));
-    bar
 }
 
 /// The files `calibrate` wrote, as its summary names them.

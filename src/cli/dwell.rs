@@ -229,20 +229,63 @@ fn strip(file: &Path, e: bonnetlab_process::ProcessError) -> String {
     msg.strip_prefix(&prefix).map(str::to_string).unwrap_or(msg)
 }
 
+/// Solves the case; the JSON goes to `--json` (stdout for `-`), or to stdout when neither
+/// `--json` nor `--out` is given; otherwise stdout gets a one-line summary of what was written.
 pub fn run(args: &Args) -> Result<(), CliError> {
     let target = target_of(args)?;
-    let solved = solve_case(&args.case, args.method, target, args.iterations)?;
+    let bar = super::progress::spinner("dwell");
+    bar.set_message(format!("solving {}", args.case.display()));
+    let solved = solve_case(&args.case, args.method, target, args.iterations);
+    bar.finish_and_clear();
+    let solved = solved?;
     if let Some(dir) = &args.out {
         write_outputs(dir, &solved)?;
     }
     let report = &solved.report;
-    let text =
-        serde_json::to_string_pretty(report).map_err(|e| CliError::processing(&args.case, e))?;
     match &args.json {
         Some(p) => super::emit_json(p, report)?,
-        None => super::println_stdout(&text)?,
+        None if args.out.is_none() => {
+            let text = serde_json::to_string_pretty(report)
+                .map_err(|e| CliError::processing(&args.case, e))?;
+            super::println_stdout(&text)?
+        }
+        None => {}
+    }
+    let json_on_stdout = match &args.json {
+        Some(p) => super::is_stdout(p),
+        None => args.out.is_none(),
+    };
+    if !json_on_stdout {
+        super::println_stdout(&summary(report, &written(args)))?;
     }
     Ok(())
+}
+
+/// The files `dwell` wrote, as its summary names them.
+fn written(args: &Args) -> Vec<String> {
+    let mut wrote = Vec::new();
+    if let Some(dir) = &args.out {
+        wrote.push(format!("{}/", dir.display()));
+    }
+    if let Some(j) = args.json.as_deref().filter(|j| !super::is_stdout(j)) {
+        wrote.push(j.display().to_string());
+    }
+    wrote
+}
+
+/// `dwell: wrote A and B: method M, total dwell T min, residual RMS R nm (PV P nm) in the clear
+/// aperture`: one line, numbers to their precision.
+fn summary(r: &DwellReport, wrote: &[String]) -> String {
+    use crate::report::format::sig;
+    format!(
+        "dwell: wrote {}: {}, total dwell {} min, residual RMS {} nm (PV {} nm) in the clear aperture{}",
+        wrote.join(" and "),
+        r.method,
+        sig(r.total_dwell_s / 60.0, 4),
+        sig(r.residual_rms_nm, 4),
+        sig(r.residual_pv_nm, 4),
+        if r.target_met { "" } else { "; target not met" },
+    )
 }
 
 /// The reference methods' (total dwell min, residual nm) points of a case's `[reference]`.
@@ -269,7 +312,7 @@ fn write_outputs(dir: &Path, solved: &SolvedCase) -> Result<(), CliError> {
         solved.offset,
         solved.pixel_mm,
     );
-    let werr = |e: report::write::WriteError| CliError::input(&e.file, e.what);
+    let werr = super::write_error;
     let on_grid = |a: &ndarray::Array2<f64>,
                    mask: Option<&ndarray::Array2<bool>>|
      -> Result<Surface, CliError> {

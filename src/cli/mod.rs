@@ -118,6 +118,12 @@ pub fn read_text_input(path: &Path, what: &str) -> Result<String, CliError> {
         .map_err(|e| CliError::input(path, format!("cannot read: {}", error::io_what(&e))))
 }
 
+/// A write failure of an output set or file, naming the file (exit 2):
+/// `FILE: cannot write: WHY`.
+pub fn write_error(e: crate::report::write::WriteError) -> CliError {
+    CliError::input(&e.file, format!("cannot write: {}", e.what))
+}
+
 /// Whether an output path means stdout (`-`).
 pub fn is_stdout(path: &Path) -> bool {
     path.as_os_str() == "-"

@@ -13,3 +13,21 @@ impl crate::pipeline::Progress for Bar {
         self.0.inc(1);
     }
 }
+
+/// A spinner on stderr labelled `what`, with the elapsed time and a message (drawn on a
+/// terminal only; hidden when stderr is redirected).
+pub fn spinner(what: &str) -> ProgressBar {
+    use std::io::IsTerminal;
+    let target = if std::io::stderr().is_terminal() {
+        indicatif::ProgressDrawTarget::stderr()
+    } else {
+        indicatif::ProgressDrawTarget::hidden()
+    };
+    let bar = ProgressBar::with_draw_target(None, target);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(&format!("{{spinner}} {what} {{elapsed}} {{msg}}"))
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+    );
+    bar.enable_steady_tick(std::time::Duration::from_millis(120));
+    bar
+}

@@ -102,7 +102,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
 /// Writes the maps, JSON and plots of a simulation into `dir`, published as one set (nothing
 /// in `dir` changes unless every file is written; a second run into `dir` is refused).
 pub fn write_outputs(dir: &Path, sim: &Simulation) -> Result<(), CliError> {
-    let werr = |e: report::write::WriteError| CliError::input(&e.file, e.what);
+    let werr = super::write_error;
     let mut set = report::write::Set::begin(dir).map_err(werr)?;
     set.surface(
         "predicted_after.dat",

@@ -176,10 +176,44 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         }
         .map_err(|e| CliError::processing(json_path, e))?;
         super::emit(json_path, format!("{text}\n").as_bytes())?;
+        if !super::is_stdout(json_path) {
+            let mut wrote = vec![json_path.display().to_string()];
+            wrote.extend(args.out.iter().map(|d| format!("{}/", d.display())));
+            super::println_stdout(&written_line(&wrote, &outs))?;
+        }
     } else {
-        super::write_stdout(summary(&params, &outs).as_bytes())?;
+        let mut text = summary(&params, &outs);
+        if let Some(dir) = &args.out {
+            text += &format!(
+                "vibration: wrote {}/ (FRF plots and the tool-tip time series)\n",
+                dir.display()
+            );
+        }
+        super::write_stdout(text.as_bytes())?;
     }
     Ok(())
+}
+
+/// `vibration: wrote FILES: original offset A mm, suppression offset B mm at N rpm`: the
+/// success line when the JSON went to a file.
+fn written_line(wrote: &[String], outs: &[BonnetOut]) -> String {
+    use crate::report::format::sig;
+    let per: Vec<String> = outs
+        .iter()
+        .map(|o| {
+            format!(
+                "{} offset amplitude {} mm (transfer {})",
+                o.response.bonnet.name(),
+                sig(o.response.offset_amplitude_mm, 4),
+                sig(o.offset_transfer, 3)
+            )
+        })
+        .collect();
+    format!(
+        "vibration: wrote {}: {}",
+        wrote.join(" and "),
+        per.join(", ")
+    )
 }
 
 fn summary(p: &VibrationParams, outs: &[BonnetOut]) -> String {
@@ -353,5 +387,5 @@ fn write_timeseries(
 
 /// A write failure of the output set, naming the file (exit 2).
 fn werr(e: report::write::WriteError) -> CliError {
-    CliError::input(&e.file, format!("cannot write: {}", e.what))
+    super::write_error(e)
 }

@@ -8,7 +8,12 @@ use crate::pipeline::stats::StatsReport;
 
 /// The `stats` table of a map.
 pub fn table(r: &StatsReport) -> String {
-    let mm = |v: Option<f64>| v.map_or("unknown".to_string(), |v| format!("{v:.6e} mm"));
+    // The pixel size to the precision files store it (f32: 7 significant digits), as `psd`.
+    let mm = |v: Option<f64>| {
+        v.map_or("unknown".to_string(), |v| {
+            format!("{} mm", crate::report::format::f32_value(v))
+        })
+    };
     let removed: Vec<&str> = r.removed.iter().map(Term::name).collect();
     let removed = if removed.is_empty() {
         "none".to_string()

@@ -22,7 +22,15 @@ pub struct WriteError {
 fn werr(path: &Path, e: impl std::fmt::Display) -> WriteError {
     WriteError {
         file: path.display().to_string(),
-        what: e.to_string().replace('\n', " "),
+        what: without_os_error(&e.to_string().replace('\n', " ")),
+    }
+}
+
+/// An error text without Rust's trailing " (os error N)".
+fn without_os_error(s: &str) -> String {
+    match s.find(" (os error ") {
+        Some(i) if s.ends_with(')') => s[..i].to_string(),
+        _ => s.to_string(),
     }
 }
 
