@@ -367,6 +367,8 @@ struct Outcome {
     cut: f64,
     unexplained: usize,
     wall_s: f64,
+    /// Per parameter: estimate, truth and reported 1-sigma (for the log).
+    detail: String,
 }
 
 fn num(v: Option<&serde_json::Value>) -> Option<f64> {
@@ -424,7 +426,12 @@ fn assess(kind: &str, truth: &Truth, cal: &Calibration, true_floor: f64) -> Outc
             };
             let err = (est - v).abs();
             worst = worst.max(err / scale);
-            if let Some(s) = num(e.uncertainties.get(p)) {
+            let sig = num(e.uncertainties.get(p));
+            o.detail.push_str(&format!(
+                " {p}: est {est:.5} true {v:.5} sigma {}",
+                fmt(sig, 5)
+            ));
+            if let Some(s) = sig {
                 o.with_sigma += 1;
                 if err <= s {
                     o.covered += 1;
@@ -522,13 +529,14 @@ fn main() {
                     o.wall_s = wall;
                     let kinds: Vec<&str> = cal.effects.iter().map(|e| e.kind.as_str()).collect();
                     eprintln!(
-                        "{kind} x{size} run {r}: {:?} unexplained {} final/floor {:.2} floor/true {:.2} err {} {:.1} s",
+                        "{kind} x{size} run {r}: {:?} unexplained {} final/floor {:.2} floor/true {:.2} err {} {:.1} s{}",
                         kinds,
                         cal.unexplained.len(),
                         o.final_over_floor,
                         o.floor_over_true,
                         fmt(o.rel_error, 3),
-                        wall
+                        wall,
+                        o.detail
                     );
                     o
                 }

@@ -69,7 +69,7 @@ impl Effect for Registration {
 /// Derivatives of the resampled after map `A(T_theta x)` with respect to (dx, dy, theta) at
 /// the evaluation's registration, from the map lightly smoothed (sigma 1 px), as full maps.
 pub fn after_derivatives(p: &Problem, ev: &Eval) -> [Array2<f64>; 3] {
-    after_derivatives_at(p, &ev.after_res, &ev.after_res_valid, ev.reg)
+    after_derivatives_at(p, &ev.after_res, &ev.after_res_valid, ev.reg, 1.0)
 }
 
 /// [`after_derivatives`] of an after map resampled at registration `reg`.
@@ -78,9 +78,10 @@ fn after_derivatives_at(
     after_res: &Array2<f64>,
     valid: &Array2<bool>,
     reg: [f64; 3],
+    sigma_px: f64,
 ) -> [Array2<f64>; 3] {
     let g = &p.grid;
-    let a = smooth_masked(after_res, valid, 1.0);
+    let a = smooth_masked(after_res, valid, sigma_px);
     let (r, c) = a.dim();
     let (cx, cy) = g.centre_mm();
     let (ct, st) = (reg[2].cos(), reg[2].sin());
@@ -109,7 +110,15 @@ fn after_derivatives_at(
 /// Jacobian columns of the residual `m - prediction` (m = before - A o T) with respect to
 /// (dx, dy, theta) on the analysis pixels: `-dA(T x)/dtheta`, 0 where the pixel is not used.
 pub fn jacobian(p: &Problem, ev: &Eval) -> Vec<Vec<f64>> {
-    after_derivatives(p, ev)
+    jacobian_smoothed(p, ev, 1.0)
+}
+
+/// [`jacobian`] from the after map smoothed with `sigma_px` (pixels) instead of 1 px: a second
+/// estimating equation for the same parameters. Where the residual holds structure that does
+/// not resample identically (sub-pixel texture alias), the two equations have different zeros,
+/// and their distance measures the registration's systematic error (see `uncertainty`).
+pub fn jacobian_smoothed(p: &Problem, ev: &Eval, sigma_px: f64) -> Vec<Vec<f64>> {
+    after_derivatives_at(p, &ev.after_res, &ev.after_res_valid, ev.reg, sigma_px)
         .iter()
         .map(|d| {
             p.compress(d)
@@ -156,7 +165,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
                 .zip(&both)
                 .map(|(v, &ok)| if ok { v } else { 0.0 })
                 .collect();
-            let [gx, gy, gr] = after_derivatives_at(p, &a0, &v0, c.reg);
+            let [gx, gy, gr] = after_derivatives_at(p, &a0, &v0, c.reg, 1.0);
             let at = c.reg;
             return vec![Candidate {
                 key: "registration".into(),
