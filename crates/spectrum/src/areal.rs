@@ -38,6 +38,7 @@
 use std::sync::Arc;
 
 use bonnetlab_surface::fill::fill_invalid;
+use bonnetlab_surface::surface::mask_bounds;
 use bonnetlab_surface::{remove_terms, Surface, Term};
 use ndarray::Array2;
 use rayon::prelude::*;
@@ -249,19 +250,10 @@ pub fn band_split(
 /// Lengths (mm) of the bounding box of the valid pixels along X and Y (pixel counts times
 /// the pixel size: a field of N pixels measures periods up to N d).
 fn valid_extent_mm(valid: &Array2<bool>, dx: f64, dy: f64) -> (f64, f64) {
-    let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
-    for ((i, j), &ok) in valid.indexed_iter() {
-        if ok {
-            r0 = r0.min(i);
-            r1 = r1.max(i);
-            c0 = c0.min(j);
-            c1 = c1.max(j);
-        }
+    match mask_bounds(valid) {
+        Some((r0, r1, c0, c1)) => ((c1 - c0 + 1) as f64 * dx, (r1 - r0 + 1) as f64 * dy),
+        None => (0.0, 0.0),
     }
-    if r0 == usize::MAX {
-        return (0.0, 0.0);
-    }
-    ((c1 - c0 + 1) as f64 * dx, (r1 - r0 + 1) as f64 * dy)
 }
 
 /// 2-D orthonormal DCT-II of `a` (`inverse`: its inverse, the DCT-III), along rows then
