@@ -170,7 +170,7 @@ pub fn simulate(
     step("recipe");
     let recipe = Recipe::load(recipe_file).map_err(|e| perr(recipe_file, e))?;
     let before = read_map(&recipe.before)?;
-    let grid = Grid::of(&before).map_err(|e| perr(&recipe.before, e))?;
+    let grid = Grid::of(&before).map_err(|e| perr(&recipe.before, e.into()))?;
     step("tif");
     let spot = match &recipe.tif {
         TifSource::Spot { path, .. } => Some(read_map(path)?),

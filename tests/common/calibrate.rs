@@ -1,9 +1,12 @@
 //! Shared set-up of the calibration tests: generate a synthetic run (exact time-domain
-//! deposition, independent of the calibration's FFT model), calibrate it, and describe the
-//! outcome for assertion messages.
+//! deposition, independent of the calibration's FFT model), write it as a run directory, load
+//! and calibrate it through the pipeline the CLI calls (`bonnetlab::pipeline::calibrate`), and
+//! describe the outcome for assertion messages.
 
-use bonnetlab::calibrate::run::{calibrate, Calibration, Options};
+use bonnetlab::calibrate::run::{Calibration, Options};
+use bonnetlab::calibrate::synth::write::write_run;
 use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig};
+use bonnetlab::pipeline::calibrate::{calibrate, load};
 
 /// Calibrates a default-size run with these undeclared effects.
 pub fn run(effects: Vec<Injected>, seed: u64) -> Calibration {
@@ -17,15 +20,10 @@ pub fn run(effects: Vec<Injected>, seed: u64) -> Calibration {
 /// Calibrates a run generated from `cfg`.
 pub fn run_cfg(cfg: &SynthConfig) -> Calibration {
     let run = generate(cfg).unwrap();
-    let p = bonnetlab::calibrate::pipeline::problem_with_spot(
-        &run.before,
-        &run.after,
-        &run.spot,
-        run.spot_dwell_s,
-        &run.path,
-    )
-    .unwrap();
-    calibrate(&p, &Options::default()).unwrap()
+    let dir = tempfile::tempdir().unwrap();
+    let recipe = write_run(dir.path(), &run).unwrap();
+    let p = load(&recipe).unwrap_or_else(|e| panic!("{}", e.message));
+    calibrate(&recipe, &p, &Options::default()).unwrap_or_else(|e| panic!("{}", e.message))
 }
 
 /// A numeric parameter of the first accepted effect of `kind` (panics with the summary if

@@ -1,20 +1,17 @@
-//! Maps on the run's grid (the process crate's [`MapGrid`]): bilinear sampling of maps at path
-//! positions, masked Gaussian smoothing and a signed distance to the part edge.
+//! Maps on the run's grid ([`MapGrid`], the project's one grid type): bilinear sampling of maps
+//! at path positions, masked Gaussian smoothing and a signed distance to the part edge.
 
+use bonnetlab_process::interp::bilinear_clamped;
 use ndarray::Array2;
 
-/// The map grid: the process crate's one grid type.
-pub use bonnetlab_process::Grid as MapGrid;
+/// The map grid: the project's one grid type (`bonnetlab_surface::Grid`).
+pub use bonnetlab_surface::Grid as MapGrid;
 
-/// Bilinear sample of a (hole-free) map at (x, y) mm, positions clamped to the grid.
+/// Bilinear sample of a (hole-free) map at (x, y) mm, positions clamped to the grid
+/// (`bonnetlab_process::interp::bilinear_clamped`).
 pub fn sample(g: &MapGrid, a: &Array2<f64>, x: f64, y: f64) -> f64 {
-    let fj = ((x - g.x0_mm) / g.dx_mm).clamp(0.0, (g.cols - 1) as f64);
-    let fi = ((y - g.y0_mm) / g.dy_mm).clamp(0.0, (g.rows - 1) as f64);
-    let (i0, j0) = (fi as usize, fj as usize);
-    let (i1, j1) = ((i0 + 1).min(g.rows - 1), (j0 + 1).min(g.cols - 1));
-    let (p, q) = (fi - i0 as f64, fj - j0 as f64);
-    (1.0 - p) * ((1.0 - q) * a[(i0, j0)] + q * a[(i0, j1)])
-        + p * ((1.0 - q) * a[(i1, j0)] + q * a[(i1, j1)])
+    let (u, v) = g.frac_index(x, y);
+    bilinear_clamped(a, u, v)
 }
 
 /// Masked (normalised) separable Gaussian smoothing with `sigma_px` pixels; invalid pixels get

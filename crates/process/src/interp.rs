@@ -1,7 +1,9 @@
 //! Interpolation of sampled maps at fractional (row, column) positions: the one place the
-//! project's removal model interpolates a grid (bilinear for a sampled TIF, Catmull-Rom bicubic
-//! for a measured spot). Positions are in pixels of the array (row u, column v); outside the
-//! array the value is 0 (a footprint is zero beyond its samples).
+//! project interpolates a grid (bilinear for a sampled TIF, clamped for a hole-free map sampled
+//! along a path, masked for a map with dropouts; Catmull-Rom bicubic and band-limited
+//! upsampling for a measured spot). Positions are in pixels of the array (row u, column v);
+//! outside the array the value is 0 (a footprint is zero beyond its samples) unless a
+//! function says otherwise.
 
 use ndarray::Array2;
 
@@ -21,6 +23,39 @@ pub fn bilinear(a: &Array2<f64>, u: f64, v: f64) -> f64 {
     let at = |ii: usize, jj: usize| if ii < r && jj < c { a[(ii, jj)] } else { 0.0 };
     (1.0 - fu) * ((1.0 - fv) * at(i, j) + fv * at(i, j + 1))
         + fu * ((1.0 - fv) * at(i + 1, j) + fv * at(i + 1, j + 1))
+}
+
+/// Bilinear interpolation of `a` at fractional (row u, col v) with the position clamped to the
+/// array (a hole-free map sampled at the part edge takes its border values, never 0).
+pub fn bilinear_clamped(a: &Array2<f64>, u: f64, v: f64) -> f64 {
+    let (r, c) = a.dim();
+    if r == 0 || c == 0 {
+        return 0.0;
+    }
+    bilinear(
+        a,
+        u.clamp(0.0, (r - 1) as f64),
+        v.clamp(0.0, (c - 1) as f64),
+    )
+}
+
+/// Bilinear interpolation of a masked map at fractional (row u, col v): `None` outside the
+/// array or when a pixel the value depends on (a neighbour with a non-zero weight) is invalid.
+pub fn bilinear_masked(a: &Array2<f64>, valid: &Array2<bool>, u: f64, v: f64) -> Option<f64> {
+    let (r, c) = a.dim();
+    if !(u >= 0.0 && v >= 0.0) {
+        return None;
+    }
+    let (i0, j0) = (u.floor() as usize, v.floor() as usize);
+    let i1 = if u > i0 as f64 { i0 + 1 } else { i0 };
+    let j1 = if v > j0 as f64 { j0 + 1 } else { j0 };
+    if i1 >= r || j1 >= c {
+        return None;
+    }
+    let all_valid = [(i0, j0), (i0, j1), (i1, j0), (i1, j1)]
+        .iter()
+        .all(|&p| valid[p]);
+    all_valid.then(|| bilinear(a, u, v))
 }
 
 /// Catmull-Rom weights of the taps at -1, 0, 1, 2 around fraction t.
@@ -138,5 +173,29 @@ mod tests {
         let a = Array2::from_shape_fn((5, 6), |(i, j)| 2.0 * i as f64 - j as f64);
         assert!((bilinear(&a, 1.25, 3.5) - (2.5 - 3.5)).abs() < 1e-12);
         assert_eq!(bilinear(&a, 5.5, 1.0), 0.0);
+        // Clamped: the border value beyond the array, the interpolant inside.
+        assert_eq!(bilinear_clamped(&a, 7.0, -2.0), a[(4, 0)]);
+        assert_eq!(bilinear_clamped(&a, 4.0, 5.0), a[(4, 5)]);
+        assert_eq!(bilinear_clamped(&a, 1.25, 3.5), bilinear(&a, 1.25, 3.5));
+    }
+
+    #[test]
+    fn masked_bilinear_needs_the_pixels_it_weights() {
+        let a = Array2::from_shape_fn((5, 6), |(i, j)| 2.0 * i as f64 - j as f64);
+        let mut valid = Array2::from_elem((5, 6), true);
+        valid[(2, 3)] = false;
+        assert_eq!(bilinear_masked(&a, &valid, 1.25, 3.5), None);
+        assert_eq!(bilinear_masked(&a, &valid, 1.0, 4.0), Some(a[(1, 4)]));
+        // On a node next to the hole only the node itself counts.
+        assert_eq!(bilinear_masked(&a, &valid, 2.0, 4.0), Some(a[(2, 4)]));
+        assert_eq!(bilinear_masked(&a, &valid, 2.0, 2.5), None);
+        assert_eq!(
+            bilinear_masked(&a, &valid, 3.5, 0.5),
+            bilinear(&a, 3.5, 0.5).into()
+        );
+        // The last row and column are reachable on their nodes, not beyond.
+        assert_eq!(bilinear_masked(&a, &valid, 4.0, 5.0), Some(a[(4, 5)]));
+        assert_eq!(bilinear_masked(&a, &valid, 4.0, 5.5), None);
+        assert_eq!(bilinear_masked(&a, &valid, -0.1, 1.0), None);
     }
 }

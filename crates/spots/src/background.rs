@@ -7,11 +7,18 @@
 //! `ring_inner = 1.4 R5` and `ring_outer = 1.9 R5`, where `R5` is the equivalent radius
 //! (sqrt(area / pi)) of the pixels removed by more than 5 % of the peak. The ring may run off the
 //! map: only its valid pixels are used, and at least `MIN_RING_PIXELS` are required.
+//!
+//! The fit itself is the process TIF front end's (`bonnetlab_process::tif::measured`:
+//! `plane_background`, and `border_ring` for the rough first background); only the ring differs:
+//! the front end uses the map's border ring, the spot metrics the annulus about the spot that the
+//! manifest can set (`ring_inner_mm`, `ring_outer_mm`).
 
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 
-use bonnetlab_surface::form::{evaluate_fit, fit_terms};
+use bonnetlab_process::tif::measured::SpotOptions as ProcessSpotOptions;
+use bonnetlab_process::tif::measured::{border_ring, plane_background};
+use bonnetlab_process::ProcessError;
 use bonnetlab_surface::{Surface, Term};
 
 use crate::error::SpotsError;
@@ -74,7 +81,8 @@ pub fn ring_mask(s: &Surface, ring: &Ring) -> Array2<bool> {
 }
 
 /// Fits piston + tilt on `mask` and returns the removal map (signed by `kind`) and the RMS
-/// of the fit residual on the mask.
+/// of the fit residual on the mask: the process TIF front end's background
+/// (`bonnetlab_process::tif::measured::plane_background`) on this crate's ring.
 pub fn removal_after_plane(
     s: &Surface,
     mask: Array2<bool>,
@@ -87,20 +95,15 @@ pub fn removal_after_plane(
              the map is too small around the spot or the ring radii are wrong"
         )));
     }
-    let on_ring = s.with_valid(mask.clone())?;
-    let fit = fit_terms(&on_ring, &[Term::Piston, Term::Tilt])?;
-    let plane = evaluate_fit(s, &fit);
-    let mut sum2 = 0.0;
-    for ((h, p), &m) in s.heights_nm().iter().zip(plane.iter()).zip(mask.iter()) {
-        if m {
-            sum2 += (h - p) * (h - p);
-        }
-    }
-    let removal = s.heights_nm() - &plane;
-    let removal = removal.mapv(|v| signed(v, kind));
-    let mut out = s.with_heights(removal)?;
+    let bg = plane_background(s, &mask).map_err(|e| match e {
+        ProcessError::Surface(e) => SpotsError::Surface(e),
+        e => SpotsError::Spot(e.to_string()),
+    })?;
+    let mut out = bg
+        .residual
+        .with_heights(bg.residual.heights_nm().mapv(|v| signed(v, kind)))?;
     out.removed = vec![Term::Piston, Term::Tilt];
-    Ok((out, n, (sum2 / n as f64).sqrt()))
+    Ok((out, bg.pixels, bg.rms_nm))
 }
 
 /// Fits the background on `ring` and returns the removal map.
@@ -115,14 +118,11 @@ pub fn fit_background(s: &Surface, ring: Ring, kind: MapKind) -> Result<Backgrou
     })
 }
 
-/// Mask of the outer frame of the map (pixels within `width` of an edge): the first, rough
-/// background before the spot is located.
-pub fn frame_mask(s: &Surface, width: usize) -> Array2<bool> {
-    let (rows, cols) = s.dim();
-    let valid = s.valid();
-    Array2::from_shape_fn((rows, cols), |(i, j)| {
-        valid[(i, j)] && (i < width || j < width || i + width >= rows || j + width >= cols)
-    })
+/// Mask of the outer frame of the map: the first, rough background before the spot is located,
+/// the process TIF front end's border ring (`bonnetlab_process::tif::measured::border_ring`,
+/// with its default width of a tenth of the smaller side).
+pub fn frame_mask(s: &Surface) -> Array2<bool> {
+    border_ring(s.valid(), ProcessSpotOptions::default().ring_fraction)
 }
 
 #[cfg(test)]

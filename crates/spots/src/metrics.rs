@@ -3,7 +3,7 @@
 //!
 //! Steps (each one's convention is in its module):
 //! 1. Rough background: piston + tilt on the outer frame of the map (one tenth of the smaller
-//!    side, at least 2 pixels); rough removal, its smoothed maximum, the rough centroid of the
+//!    side, rounded, at least 2 pixels: the border ring of the process TIF front end); rough removal, its smoothed maximum, the rough centroid of the
 //!    pixels above half of it, and `R5` = sqrt(area / pi) of the pixels above 5 % of it within
 //!    three half-maximum radii of that centroid.
 //! 2. Background: piston + tilt fitted on the ring `[1.4 R5, 1.9 R5]` about the rough centre
@@ -125,8 +125,7 @@ pub fn measure_spot(
         )));
     }
     // 1. Rough background on the frame, rough centre and size.
-    let width = (s.rows().min(s.cols()) / 10).max(2);
-    let (rough, _, _) = removal_after_plane(s, frame_mask(s, width), opt.kind)?;
+    let (rough, _, _) = removal_after_plane(s, frame_mask(s), opt.kind)?;
     let (_, _, rough_peak) = smoothed_max(&rough).ok_or(SpotsError::Surface(
         bonnetlab_surface::SurfaceError::NoValidPixel,
     ))?;

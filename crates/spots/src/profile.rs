@@ -5,30 +5,15 @@
 //! first falls below half the peak; the crossing is interpolated linearly between the last two
 //! samples. FWHM along X = left + right half-widths through the centre, along Y likewise.
 
+use bonnetlab_process::interp::bilinear_masked;
 use bonnetlab_surface::Surface;
 
-/// Bilinear interpolation of the valid map at (x, y) mm; `None` outside or next to a hole.
+/// Bilinear interpolation of the valid map at (x, y) mm; `None` outside or next to a hole
+/// (`bonnetlab_process::interp::bilinear_masked`).
 pub fn bilinear(s: &Surface, x_mm: f64, y_mm: f64) -> Option<f64> {
-    let dx = s.dx_mm?;
-    let dy = s.dy_mm?;
-    let fx = (x_mm - s.origin_mm.0) / dx;
-    let fy = (y_mm - s.origin_mm.1) / dy;
-    if !(fx >= 0.0 && fy >= 0.0) {
-        return None;
-    }
-    let (j0, i0) = (fx.floor() as usize, fy.floor() as usize);
-    let (tx, ty) = (fx - j0 as f64, fy - i0 as f64);
-    let (rows, cols) = s.dim();
-    let j1 = if tx > 0.0 { j0 + 1 } else { j0 };
-    let i1 = if ty > 0.0 { i0 + 1 } else { i0 };
-    if i1 >= rows || j1 >= cols {
-        return None;
-    }
-    let z00 = s.get(i0, j0)?;
-    let z01 = s.get(i0, j1)?;
-    let z10 = s.get(i1, j0)?;
-    let z11 = s.get(i1, j1)?;
-    Some((1.0 - ty) * ((1.0 - tx) * z00 + tx * z01) + ty * ((1.0 - tx) * z10 + tx * z11))
+    let fx = (x_mm - s.origin_mm.0) / s.dx_mm?;
+    let fy = (y_mm - s.origin_mm.1) / s.dy_mm?;
+    bilinear_masked(s.heights_nm(), s.valid(), fy, fx)
 }
 
 /// Distance (mm) from `(cx, cy)` along the unit direction `(ux, uy)` at which the interpolated

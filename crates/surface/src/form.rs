@@ -23,7 +23,7 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use crate::basis::{self, legendre_count, MAX_LEGENDRE_DEGREE, MAX_ZERNIKE};
 use crate::error::SurfaceError;
 use crate::lsq::{solve_from_r, StreamingQr};
-use crate::surface::Surface;
+use crate::surface::{mask_bounds, Surface};
 
 /// A form term that can be removed from a map. Serialised as its command-line name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -232,18 +232,7 @@ fn positive_or_one(v: f64) -> f64 {
 fn frame(s: &Surface, terms: &[Term]) -> Result<FormFit, SurfaceError> {
     let sx = s.dx_mm.unwrap_or(1.0);
     let sy = s.dy_mm.unwrap_or(1.0);
-    let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0usize, usize::MAX, 0usize);
-    for ((i, j), &v) in s.valid().indexed_iter() {
-        if v {
-            r0 = r0.min(i);
-            r1 = r1.max(i);
-            c0 = c0.min(j);
-            c1 = c1.max(j);
-        }
-    }
-    if r0 == usize::MAX {
-        return Err(SurfaceError::NoValidPixel);
-    }
+    let (r0, r1, c0, c1) = mask_bounds(s.valid()).ok_or(SurfaceError::NoValidPixel)?;
     let cx = 0.5 * (c0 + c1) as f64 * sx;
     let cy = 0.5 * (r0 + r1) as f64 * sy;
     let hx = 0.5 * (c1 - c0) as f64 * sx;

@@ -9,8 +9,10 @@
 pub mod basis;
 pub mod convergence;
 pub mod error;
+pub mod fill;
 pub mod form;
 pub mod format;
+pub mod grid;
 pub mod lsq;
 pub mod pvr;
 pub mod rng;
@@ -23,6 +25,7 @@ pub use convergence::{
 };
 pub use error::SurfaceError;
 pub use form::{evaluate_fit, fit_terms, remove_terms, FormFit, Term};
+pub use grid::Grid;
 pub use pvr::{pvr, Pvr, PVR_SET};
 pub use stats::{height_stats, HeightStats};
 pub use surface::{Provenance, Surface};

@@ -225,6 +225,21 @@ impl Surface {
     }
 }
 
+/// Bounding box of the `true` pixels of a mask as inclusive (first row, last row, first column,
+/// last column); `None` when no pixel is set.
+pub fn mask_bounds(valid: &Array2<bool>) -> Option<(usize, usize, usize, usize)> {
+    let (mut r0, mut r1, mut c0, mut c1) = (usize::MAX, 0, usize::MAX, 0);
+    for ((i, j), &ok) in valid.indexed_iter() {
+        if ok {
+            r0 = r0.min(i);
+            r1 = r1.max(i);
+            c0 = c0.min(j);
+            c1 = c1.max(j);
+        }
+    }
+    (r0 != usize::MAX).then_some((r0, r1, c0, c1))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -243,6 +258,15 @@ mod tests {
     fn rejects_bad_pixel_size_and_mismatched_mask() {
         assert!(Surface::new(array![[1.0]], Some(0.0), Some(0.1)).is_err());
         assert!(Surface::with_mask(array![[1.0]], array![[true, true]], None, None).is_err());
+    }
+
+    #[test]
+    fn mask_bounds_box_the_set_pixels() {
+        let mut v = Array2::from_elem((4, 5), false);
+        assert_eq!(mask_bounds(&v), None);
+        v[(1, 3)] = true;
+        v[(2, 1)] = true;
+        assert_eq!(mask_bounds(&v), Some((1, 2, 1, 3)));
     }
 
     #[test]

@@ -18,7 +18,9 @@ use std::path::Path;
 use bonnetlab_process::fft::Fft2;
 use bonnetlab_process::interp::catmull_rom;
 use bonnetlab_process::Grid;
+use bonnetlab_surface::fill::fill_invalid;
 use bonnetlab_surface::rng::Rng;
+use bonnetlab_surface::{remove_terms, Surface, Term};
 use ndarray::Array2;
 use rustfft::num_complex::Complex;
 
@@ -168,112 +170,32 @@ pub fn smooth_random(rng: &mut Rng, grid: &Grid, correlation_mm: f64) -> Array2<
     a
 }
 
-/// Fills invalid pixels from their valid neighbours, front by front (breadth first): every
-/// filled pixel takes the mean of its already known 8-neighbours.
-fn fill_invalid(h: &mut Array2<f64>, valid: &Array2<bool>) -> bool {
-    let (r, c) = h.dim();
-    let mut known = valid.clone();
-    let mut front: Vec<(usize, usize)> = Vec::new();
-    let mut queued = Array2::from_elem((r, c), false);
-    let nb = |i: usize, j: usize| {
-        let mut v = Vec::with_capacity(8);
-        for di in -1i64..=1 {
-            for dj in -1i64..=1 {
-                let (a, b) = (i as i64 + di, j as i64 + dj);
-                if (di, dj) != (0, 0) && a >= 0 && b >= 0 && (a as usize) < r && (b as usize) < c {
-                    v.push((a as usize, b as usize));
-                }
-            }
-        }
-        v
-    };
-    for ((i, j), &k) in known.indexed_iter() {
-        if !k && nb(i, j).iter().any(|&p| valid[p]) {
-            front.push((i, j));
-            queued[(i, j)] = true;
-        }
-    }
-    if known.iter().all(|&k| !k) {
-        return false;
-    }
-    while !front.is_empty() {
-        let vals: Vec<f64> = front
-            .iter()
-            .map(|&(i, j)| {
-                let (mut s, mut n) = (0.0, 0.0);
-                for p in nb(i, j) {
-                    if known[p] {
-                        s += h[p];
-                        n += 1.0;
-                    }
-                }
-                if n > 0.0 {
-                    s / n
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        for (&p, v) in front.iter().zip(vals) {
-            h[p] = v;
-            known[p] = true;
-        }
-        let mut next = Vec::new();
-        for &(i, j) in &front {
-            for p in nb(i, j) {
-                if !known[p] && !queued[p] {
-                    queued[p] = true;
-                    next.push(p);
-                }
-            }
-        }
-        front = next;
-    }
-    true
-}
-
 /// A real map as an initial surface: read with `bonnetlab_io`, invalid pixels filled, piston
 /// and tilt removed, its largest centred square stretched over `grid` (Catmull-Rom), scaled to
 /// RMS `rms_nm`.
 pub fn from_real_map(path: &Path, grid: &Grid, rms_nm: f64) -> Result<Array2<f64>, CalibrateError> {
     let s = bonnetlab_io::read_surface(path)
         .map_err(|e| CalibrateError::InvalidInput(format!("{}: {e}", path.display())))?;
-    let mut h = s.heights_nm().clone();
-    let valid = s.valid().clone();
-    h.zip_mut_with(&valid, |v, &ok| {
-        if !ok || !v.is_finite() {
-            *v = 0.0;
-        }
-    });
-    let valid = Array2::from_shape_fn(h.dim(), |p| valid[p] && s.heights_nm()[p].is_finite());
-    if !fill_invalid(&mut h, &valid) {
+    // A Surface's heights are finite everywhere and its mask says which are data.
+    let valid = s.valid();
+    if s.valid_count() == 0 {
         return Err(CalibrateError::InvalidInput(format!(
             "{}: no valid pixel",
             path.display()
         )));
     }
     // Piston and tilt by least squares over the (filled) map.
+    let filled = Surface::new(fill_invalid(s.heights_nm(), valid), s.dx_mm, s.dy_mm)?;
+    let (flat, _) = remove_terms(&filled, &[Term::Piston, Term::Tilt])?;
+    let h = flat.heights_nm();
     let (r, c) = h.dim();
     let (cy, cx) = ((r as f64 - 1.0) / 2.0, (c as f64 - 1.0) / 2.0);
-    let (mut sz, mut sxz, mut syz, mut sxx, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for ((i, j), &z) in h.indexed_iter() {
-        let (x, y) = (j as f64 - cx, i as f64 - cy);
-        sz += z;
-        sxz += x * z;
-        syz += y * z;
-        sxx += x * x;
-        syy += y * y;
-    }
-    let n = (r * c) as f64;
-    let (m, bx, by) = (sz / n, sxz / sxx.max(1e-12), syz / syy.max(1e-12));
-    h.indexed_iter_mut()
-        .for_each(|((i, j), z)| *z -= m + bx * (j as f64 - cx) + by * (i as f64 - cy));
     let side = r.min(c) as f64 - 1.0;
     let (i0, j0) = (cy - side / 2.0, cx - side / 2.0);
     let mut out = Array2::from_shape_fn((grid.rows, grid.cols), |(i, j)| {
         let u = i0 + side * i as f64 / (grid.rows.max(2) - 1) as f64;
         let v = j0 + side * j as f64 / (grid.cols.max(2) - 1) as f64;
-        catmull_rom(&h, u, v)
+        catmull_rom(h, u, v)
     });
     let mean = out.mean().unwrap_or(0.0);
     out.mapv_inplace(|v| v - mean);
@@ -284,22 +206,6 @@ pub fn from_real_map(path: &Path, grid: &Grid, rms_nm: f64) -> Result<Array2<f64
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn fill_reaches_every_pixel_and_keeps_valid_ones() {
-        let mut h = Array2::from_shape_fn((9, 9), |(i, j)| (i + j) as f64);
-        let valid = Array2::from_shape_fn((9, 9), |(i, j)| {
-            (i as i64 - 4).pow(2) + (j as i64 - 4).pow(2) <= 4
-        });
-        let keep = h.clone();
-        assert!(fill_invalid(&mut h, &valid));
-        for (p, &ok) in valid.indexed_iter() {
-            if ok {
-                assert_eq!(h[p], keep[p]);
-            }
-            assert!(h[p].is_finite() && h[p] >= 4.0 && h[p] <= 12.0);
-        }
-    }
 
     #[test]
     fn smoothing_keeps_the_mean_and_lowers_the_rms() {

@@ -511,7 +511,7 @@ impl Context<'_> {
     }
 }
 
-fn perr(e: bonnetlab_process::ProcessError) -> CalibrateError {
+fn perr(e: impl std::fmt::Display) -> CalibrateError {
     CalibrateError::InvalidInput(format!("synthetic run: {e}"))
 }
 

@@ -188,14 +188,14 @@ impl DwellCase {
     /// The case's dwell grid in the map frame (mm): the CA grown by the TIF radius.
     pub fn dwell_grid(&self, cp: &CaseProblem) -> Result<crate::grid::Grid, ProcessError> {
         let (r, c) = cp.problem.dim();
-        crate::grid::Grid::new(
+        Ok(crate::grid::Grid::new(
             r,
             c,
             self.pixel_mm,
             self.pixel_mm,
             cp.offset.1 as f64 * self.pixel_mm,
             cp.offset.0 as f64 * self.pixel_mm,
-        )
+        )?)
     }
 
     /// The TIF sampled at the case's pixel (point samples inside the disc, as the cases' own
@@ -236,8 +236,10 @@ impl DwellCase {
                 100.0 * MAX_INVALID_FRACTION
             )));
         }
-        let h =
-            crate::tif::measured::fill_invalid(&map.heights_nm().slice(window).to_owned(), &valid);
+        let h = bonnetlab_surface::fill::fill_invalid(
+            &map.heights_nm().slice(window).to_owned(),
+            &valid,
+        );
         let ca_min = map
             .heights_nm()
             .slice(s![r0..r1, c0..c1])

@@ -31,13 +31,15 @@
 //!    truth suite at the map pixel, interpolation alone misses the ripple sigma_1 by up to 16 %,
 //!    the fit by 0.4 % (`tests/truth_removal.rs`, `rim_reconstructions_compared`).
 
-use ndarray::Array2;
+use ndarray::{Array2, Zip};
 
 use super::bonnet::BonnetShape;
 use super::spotfit::{fit_shape, FitStart};
 use super::{RateField, Tif};
 use crate::error::ProcessError;
-use bonnetlab_surface::Surface;
+use bonnetlab_surface::fill::fill_invalid;
+use bonnetlab_surface::form::{evaluate_fit, fit_terms};
+use bonnetlab_surface::{Surface, Term};
 
 /// Options of [`tif_from_spot`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -163,7 +165,8 @@ impl MeasuredTif {
             )));
         }
         let valid = spot.valid();
-        let removal = background_removed(spot, o.ring_fraction)?;
+        let background = plane_background(spot, &border_ring(valid, o.ring_fraction))?;
+        let removal = background.residual.heights_nm().mapv(|h| -h);
         let peak = removal
             .indexed_iter()
             .filter(|(ij, _)| valid[*ij])
@@ -187,7 +190,7 @@ impl MeasuredTif {
             (v.min(cols as f64 - 1.0 - v) * dx).min(u.min(rows as f64 - 1.0 - u) * dy)
         };
         let rate = fill_invalid(&removal.mapv(|r| r / dwell_s), valid);
-        let noise = ring_noise_rms(&removal, valid, o.ring_fraction) / dwell_s;
+        let noise = background.rms_nm / dwell_s;
         let support = support_radius_mm(&rate, (u0, v0), dx, dy, noise);
         // Refine: threshold-free centroid inside a disc past the footprint.
         for _ in 0..3 {
@@ -323,103 +326,55 @@ impl RateField for MeasuredTif {
     }
 }
 
-/// Removal (nm, positive = removed) of a spot map after the border-ring plane.
-fn background_removed(spot: &Surface, ring_fraction: f64) -> Result<Array2<f64>, ProcessError> {
-    let (rows, cols) = spot.dim();
-    let h = spot.heights_nm();
-    let valid = spot.valid();
-    let ring = ((rows.min(cols) as f64 * ring_fraction).round() as usize).max(2);
-    let in_ring = |i: usize, j: usize| i < ring || j < ring || i + ring >= rows || j + ring >= cols;
-    // Plane fit on the ring: normal equations of [1, x, y] in pixel units (centred).
-    let (ci, cj) = (rows as f64 / 2.0, cols as f64 / 2.0);
-    let mut ata = [[0.0f64; 3]; 3];
-    let mut atb = [0.0f64; 3];
-    let mut n_ring = 0usize;
-    for ((i, j), &z) in h.indexed_iter() {
-        if valid[(i, j)] && in_ring(i, j) {
-            let b = [1.0, j as f64 - cj, i as f64 - ci];
-            for p in 0..3 {
-                for q in 0..3 {
-                    ata[p][q] += b[p] * b[q];
-                }
-                atb[p] += b[p] * z;
-            }
-            n_ring += 1;
-        }
-    }
-    if n_ring < 3 {
+/// Mask of the border ring of a map: the valid pixels within `ring_fraction` of the smaller map
+/// side (rounded, at least 2 pixels) from an edge, where the tool never touched. The process
+/// front end's background ring (see the module docs, step 1).
+pub fn border_ring(valid: &Array2<bool>, ring_fraction: f64) -> Array2<bool> {
+    let (rows, cols) = valid.dim();
+    let w = ((rows.min(cols) as f64 * ring_fraction).round() as usize).max(2);
+    Array2::from_shape_fn((rows, cols), |(i, j)| {
+        valid[(i, j)] && (i < w || j < w || i + w >= rows || j + w >= cols)
+    })
+}
+
+/// A spot map's background: piston and tilt fitted by least squares on a mask of untouched
+/// pixels (`bonnetlab_surface::form`), and what it leaves.
+#[derive(Debug, Clone)]
+pub struct PlaneBackground {
+    /// The map minus the plane (nm), on the map's grid and mask; invalid pixels hold 0.
+    pub residual: Surface,
+    /// Valid pixels in the mask.
+    pub pixels: usize,
+    /// RMS of `residual` over the mask: the measurement noise estimate (nm).
+    pub rms_nm: f64,
+}
+
+/// The one background convention of a spot map: piston + tilt fitted on `mask` (the border ring
+/// of [`border_ring`] for the TIF front end; the spots analysis may give its own ring) and
+/// subtracted everywhere. Removal is then `-residual` for a height map of a dip. Tilt is dropped
+/// when the mask cannot determine it; fewer than 3 valid pixels is an error.
+pub fn plane_background(s: &Surface, mask: &Array2<bool>) -> Result<PlaneBackground, ProcessError> {
+    let pixels = mask.iter().zip(s.valid()).filter(|(&m, &v)| m && v).count();
+    if pixels < 3 {
         return Err(ProcessError::Processing(
-            "spot map: no valid pixels on the border ring".into(),
+            "spot map: no valid pixels on the background ring".into(),
         ));
     }
-    let coef = solve3(ata, atb).unwrap_or([atb[0] / n_ring as f64, 0.0, 0.0]);
-    Ok(Array2::from_shape_fn((rows, cols), |(i, j)| {
-        if valid[(i, j)] {
-            -(h[(i, j)] - coef[0] - coef[1] * (j as f64 - cj) - coef[2] * (i as f64 - ci))
-        } else {
-            0.0
-        }
-    }))
-}
-
-/// Invalid pixels replaced by the mean of their valid 8-neighbours, repeated until none is left
-/// (a dropout inside the footprint becomes a smooth patch, not a hole of zero rate).
-pub(crate) fn fill_invalid(a: &Array2<f64>, valid: &Array2<bool>) -> Array2<f64> {
-    let mut out = a.clone();
-    let mut known = valid.clone();
-    let (r, c) = a.dim();
-    for _ in 0..r.max(c) {
-        let mut changed = Vec::new();
-        for i in 0..r {
-            for j in 0..c {
-                if known[(i, j)] {
-                    continue;
-                }
-                let (mut s, mut n) = (0.0, 0);
-                for di in -1isize..=1 {
-                    for dj in -1isize..=1 {
-                        let (ii, jj) = (i as isize + di, j as isize + dj);
-                        if ii >= 0 && jj >= 0 && (ii as usize) < r && (jj as usize) < c {
-                            let (ii, jj) = (ii as usize, jj as usize);
-                            if known[(ii, jj)] {
-                                s += out[(ii, jj)];
-                                n += 1;
-                            }
-                        }
-                    }
-                }
-                if n > 0 {
-                    changed.push((i, j, s / n as f64));
-                }
-            }
-        }
-        if changed.is_empty() {
-            break;
-        }
-        for (i, j, v) in changed {
-            out[(i, j)] = v;
-            known[(i, j)] = true;
-        }
-    }
-    out
-}
-
-/// RMS of the background-removed heights on the border ring (the measurement noise, nm).
-fn ring_noise_rms(removal: &Array2<f64>, valid: &Array2<bool>, ring_fraction: f64) -> f64 {
-    let (rows, cols) = removal.dim();
-    let ring = ((rows.min(cols) as f64 * ring_fraction).round() as usize).max(2);
-    let (mut s2, mut n) = (0.0, 0usize);
-    for ((i, j), &v) in removal.indexed_iter() {
-        if valid[(i, j)] && (i < ring || j < ring || i + ring >= rows || j + ring >= cols) {
-            s2 += v * v;
-            n += 1;
-        }
-    }
-    if n > 0 {
-        (s2 / n as f64).sqrt()
-    } else {
-        0.0
-    }
+    let on_mask = s.with_valid(Zip::from(mask).and(s.valid()).map_collect(|&m, &v| m && v))?;
+    let fit = fit_terms(&on_mask, &[Term::Piston, Term::Tilt])?;
+    let residual = s.with_heights(s.heights_nm() - &evaluate_fit(s, &fit))?;
+    let sum2: f64 = residual
+        .heights_nm()
+        .iter()
+        .zip(on_mask.valid())
+        .filter(|(_, &m)| m)
+        .map(|(v, _)| v * v)
+        .sum();
+    Ok(PlaneBackground {
+        residual,
+        pixels,
+        rms_nm: (sum2 / pixels as f64).sqrt(),
+    })
 }
 
 /// Fraction of the peak below which an annulus is no longer footprint, even without noise.
@@ -483,28 +438,6 @@ pub fn tif_from_spot(spot: &Surface, dwell_s: f64, o: &SpotOptions) -> Result<Ti
         ));
     }
     Tif::sample(&field, tdx, tdy)
-}
-
-/// Solves a 3x3 system by Cramer's rule; `None` when singular.
-fn solve3(a: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
-    let det = |m: [[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-    };
-    let d = det(a);
-    if d.abs() < 1e-12 * (a[0][0] * a[1][1] * a[2][2]).abs().max(1e-300) {
-        return None;
-    }
-    let mut out = [0.0; 3];
-    for (k, o) in out.iter_mut().enumerate() {
-        let mut m = a;
-        for r in 0..3 {
-            m[r][k] = b[r];
-        }
-        *o = det(m) / d;
-    }
-    Some(out)
 }
 
 #[cfg(test)]
