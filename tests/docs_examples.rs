@@ -197,24 +197,19 @@ fn recipe_commands_run_as_written() {
     ] {
         assert!(d.join(f).is_file(), "{f} not written");
     }
-    // calibrate finds the original run's built-in misregistration (0.3, -0.2) mm.
+    // calibrate finds the original run's built-in 0.3 mm direction lag.
     let cal: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("out/calibration.json")).unwrap())
             .unwrap();
-    let reg = cal["effects"]
+    let lag = cal["effects"]
         .as_array()
         .unwrap()
         .iter()
-        .find(|e| e["kind"] == "registration")
-        .unwrap_or_else(|| panic!("no registration in {cal}"));
-    let (dx, dy) = (
-        reg["params"]["dx_mm"].as_f64().unwrap(),
-        reg["params"]["dy_mm"].as_f64().unwrap(),
-    );
-    assert!(
-        (dx - 0.3).abs() < 0.06 && (dy + 0.2).abs() < 0.04,
-        "{dx} {dy}"
-    );
+        .find(|e| e["kind"] == "direction_lag")
+        .unwrap_or_else(|| panic!("no direction_lag in {cal}"))["params"]["lag_mm"]
+        .as_f64()
+        .unwrap();
+    assert!((lag - 0.3).abs() < 0.06, "lag {lag} mm vs 0.3 mm");
     let sim: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(d.join("out/simulate/simulation.json")).unwrap(),
     )
