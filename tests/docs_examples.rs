@@ -197,23 +197,27 @@ fn recipe_commands_run_as_written() {
     ] {
         assert!(d.join(f).is_file(), "{f} not written");
     }
-    // calibrate finds the original run's built-in misregistration (0.3, -0.2) mm.
+    // calibrate finds the suppression run's built-in path offset (0.3, -0.25) mm. (`calibrate`
+    // has no vibration model: on the original run it first takes a periodic x error of 6 mm
+    // period along y, which it also finds on the suppression run, and the 0.3 mm direction lag
+    // is then no longer significant; `compare`, which models the vibration, finds the lag:
+    // tests/samples.rs.)
     let cal: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("out/calibration.json")).unwrap())
             .unwrap();
-    let reg = cal["effects"]
+    let off = cal["effects"]
         .as_array()
         .unwrap()
         .iter()
-        .find(|e| e["kind"] == "registration")
-        .unwrap_or_else(|| panic!("no registration in {cal}"));
+        .find(|e| e["kind"] == "path_offset")
+        .unwrap_or_else(|| panic!("no path_offset in {cal}"));
     let (dx, dy) = (
-        reg["params"]["dx_mm"].as_f64().unwrap(),
-        reg["params"]["dy_mm"].as_f64().unwrap(),
+        off["params"]["dx_mm"].as_f64().unwrap(),
+        off["params"]["dy_mm"].as_f64().unwrap(),
     );
     assert!(
-        (dx - 0.3).abs() < 0.06 && (dy + 0.2).abs() < 0.04,
-        "{dx} {dy}"
+        (dx - 0.3).abs() < 0.06 && (dy + 0.25).abs() < 0.05,
+        "path offset ({dx}, {dy}) mm vs (0.3, -0.25) mm"
     );
     let sim: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(d.join("out/simulate/simulation.json")).unwrap(),
@@ -221,17 +225,20 @@ fn recipe_commands_run_as_written() {
     .unwrap();
     assert!(sim["rms_after_nm"].as_f64().unwrap() > 0.0);
     // The samples were read, not changed.
-    for f in [
-        "recipe.toml",
-        "before.dat",
-        "after.dat",
-        "path.csv",
-        "spot.dat",
-    ] {
-        assert_eq!(
-            std::fs::read(d.join("samples/original").join(f)).unwrap(),
-            std::fs::read(repo().join("samples/original").join(f)).unwrap()
-        );
+    for b in ["original", "suppression"] {
+        for f in [
+            "recipe.toml",
+            "before.dat",
+            "after.dat",
+            "path.csv",
+            "spot.dat",
+        ] {
+            assert_eq!(
+                std::fs::read(d.join("samples").join(b).join(f)).unwrap(),
+                std::fs::read(repo().join("samples").join(b).join(f)).unwrap(),
+                "samples/{b}/{f} changed"
+            );
+        }
     }
 }
 

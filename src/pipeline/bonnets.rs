@@ -317,6 +317,25 @@ fn effect_num(cal: &Calibration, kind: &str, key: &str) -> Option<f64> {
         .and_then(|e| num(e, key))
 }
 
+/// When the measured spectrum does not constrain a run's forcing, the mechanisms are
+/// attributed at the recipe's stated forcing (`[vibration] fn_n`) if the data allow it (at or
+/// below the fit's one-sided upper bound, or no bound found), rather than at the fit's
+/// meaningless optimum; the reason says so. The verdict stays "not constrained" (no `fn_n`).
+fn at_recipe_when_unconstrained(mut fit: ForcingFit, recipe: &VibrationParams) -> ForcingFit {
+    if fit.forcing.constrained {
+        return fit;
+    }
+    let allowed = fit.forcing.upper_bound_n.is_none_or(|u| recipe.fn_n <= u);
+    if allowed {
+        fit.best_fn_n = recipe.fn_n;
+        fit.forcing.reason = format!(
+            "{}; the mechanisms are attributed at the recipe's fn_n = {} N, which the data allow",
+            fit.forcing.reason, recipe.fn_n
+        );
+    }
+    fit
+}
+
 /// Analyses one run.
 ///
 /// Calibration does not model vibration: given the raw maps it explains the spindle imprint
@@ -481,6 +500,7 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
             0.0
         },
     };
+    let fit = at_recipe_when_unconstrained(fit, &run.params);
     let mut causes =
         vibration_effects(&model, &fit, &before, &after, &opts.remove).map_err(|e| perr(&e))?;
     for (e, (kind, added)) in cal.effects.iter().zip(&cal.maps.effect_removal_nm) {
