@@ -140,7 +140,7 @@ fn table_extents(browser: &Path, html: &Path, work: &Path) -> (Vec<f64>, f64) {
     (v[1..].to_vec(), v[0])
 }
 
-/// Every table of the compare and spots reports fits a 1280 px window (a wide table scrolls
+/// Every table of the compare, bonnets, spots and calibration reports fits a 1280 px window (a wide table scrolls
 /// inside its own box); the spots tables were 1,840 and 2,200 px wide before.
 #[test]
 #[cfg_attr(
@@ -183,10 +183,20 @@ fn report_tables_fit_a_1280_px_window() {
         "--out".as_ref(),
         spots_out.as_os_str(),
     ]);
+    // The calibration report (dwell writes no HTML report, only maps, CSV and plots).
+    let calibration = d.join("calibration");
+    let recipe = samples.join("original").join("recipe.toml");
+    run(&[
+        "calibrate".as_ref(),
+        recipe.as_os_str(),
+        "--out".as_ref(),
+        calibration.as_os_str(),
+    ]);
     for html in [
         compare.join("report.html"),
         compare.join("bonnets").join("report.html"),
         spots_out.join("report.html"),
+        calibration.join("report.html"),
     ] {
         let (tables, page_w) = table_extents(&browser, &html, d);
         assert!(!tables.is_empty(), "{}: no table measured", html.display());

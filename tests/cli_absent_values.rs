@@ -194,6 +194,18 @@ fn compare_on_a_micron_map_with_a_3_mm_pitch() {
             assert!(band["reason"].is_string(), "{band}");
         }
     }
+    // The PSD-quantity table over the same edges is absent with the same reason: before the
+    // fix it held MSF 0.000 / 0.000 and figure 36.902 / 36.439 nm (annulus sums of no bins, or
+    // of the DC bin) under a map-RMS table saying "absent: not resolvable".
+    let areal = r["bands"].as_array().unwrap();
+    for band in r["bands_psd"].as_array().unwrap() {
+        let name = band["band"].as_str().unwrap();
+        let same = areal.iter().find(|b| b["band"] == name).unwrap();
+        for key in ["rms_before_nm", "rms_after_nm", "cr"] {
+            assert!(band[key].is_null(), "bands_psd {name}: {band}");
+        }
+        assert_eq!(band["reason"], same["reason"], "bands_psd {name}");
+    }
     // The fine band holds the map's RMS: figure and MSF lie below 1 / 0.07 mm.
     let fine = &r["band_fine"];
     let rb = r["rms_before_nm"].as_f64().unwrap();
@@ -206,6 +218,12 @@ fn compare_on_a_micron_map_with_a_3_mm_pitch() {
         "ripple absent (not resolvable: the 3 mm pitch is longer than the 0.07 mm field"
     ));
     assert!(html.contains("absent"));
+    let psd_table = &html[html.find("For reference, a PSD quantity").unwrap()..];
+    let psd_table = &psd_table[..psd_table.find("</table>").unwrap()];
+    assert!(
+        !psd_table.contains("0.000") && psd_table.contains("absent"),
+        "{psd_table}"
+    );
 }
 
 /// `batch --pitch-mm 3` over a micron map and a map that resolves the pitch: the micron map's

@@ -49,6 +49,11 @@ fn make_run(d: &Path) -> std::path::PathBuf {
 }
 
 fn simulate(recipe: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    simulate_with_stdout(recipe, out, extra).0
+}
+
+/// [`simulate`], also returning what the command printed on stdout.
+fn simulate_with_stdout(recipe: &Path, out: &Path, extra: &[&str]) -> (serde_json::Value, String) {
     let o = Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
         .arg("simulate")
         .arg(recipe)
@@ -58,7 +63,10 @@ fn simulate(recipe: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_slice(&std::fs::read(out.join("simulation.json")).unwrap()).unwrap()
+    (
+        serde_json::from_slice(&std::fs::read(out.join("simulation.json")).unwrap()).unwrap(),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+    )
 }
 
 /// The library's prediction from the run's files, built without the CLI.
@@ -196,7 +204,16 @@ fn simulate_sweep_rpm_writes_table_json_and_plot() {
     let d = dir.path();
     let recipe = make_run(d);
     let out = d.join("out_sweep");
-    let v = simulate(&recipe, &out, &["--sweep-rpm"]);
+    let (v, stdout) = simulate_with_stdout(&recipe, &out, &["--sweep-rpm"]);
+    // The one success line names the sweep it wrote (before: only simulation.json).
+    assert_eq!(stdout.lines().count(), 1, "{stdout}");
+    let sweep_csv = out.join("spindle_sweep.csv").display().to_string();
+    assert!(
+        stdout.contains(&format!(
+            "spindle sweep (30 rows, 250 to 2000 rpm) in {sweep_csv} and spindle_sweep.png"
+        )),
+        "{stdout}"
+    );
     let rows = v["spindle_sweep"].as_array().unwrap();
     // 250..2000 rpm in 125 rpm steps, both bonnets.
     assert_eq!(rows.len(), 15 * 2);

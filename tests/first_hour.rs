@@ -40,6 +40,12 @@ fn demo_with_no_arguments_writes_the_report_and_says_so() {
     let dir = tempfile::tempdir().unwrap();
     let o = bin().arg("demo").current_dir(dir.path()).output().unwrap();
     let out = ok(&o);
+    // Stage messages go to a terminal only: a captured stderr stays empty on success.
+    assert!(
+        o.stderr.is_empty(),
+        "stderr: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let report = dir.path().join("reports/demo/report.html");
     assert!(report.is_file(), "no report at {}", report.display());
     let lines: Vec<&str> = out.lines().collect();

@@ -110,7 +110,7 @@ pub fn map_line(
     batch_value(file, terms, pitch_mm, window, pixel_mm).unwrap_or_else(|e| {
         json!({
             "file": file.display().to_string(),
-            "error": super::compare::hint_pixel_mm(e.message),
+            "error": super::compare::hint_pixel_mm(super::plain_message(&e.message)),
             "exit_code": e.code
         })
     })

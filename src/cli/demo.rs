@@ -33,6 +33,16 @@ use bonnetlab_process::Grid;
 use bonnetlab_vibration::coupling::{predict_both, CouplingInput, CouplingOptions};
 use bonnetlab_vibration::params::VibrationParams;
 
+/// A stage message of the demo, on stderr only when stderr is a terminal: redirected or
+/// captured, stderr holds nothing but a failure's one line (the result is the stdout line).
+macro_rules! stage {
+    ($($arg:tt)*) => {
+        if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+            eprintln!($($arg)*);
+        }
+    };
+}
+
 /// What `demo --help` says.
 pub const ABOUT: &str = "Run the bundled two-bonnet example: compare the sample maps \
 (samples/original, samples/suppression; repeat measurements before and after) and write \
@@ -296,7 +306,7 @@ fn generate_samples(dir: &Path, seed: u64, repeats: usize) -> Result<(), CliErro
     if repeats == 0 {
         return Err(CliError::usage("--repeats must be at least 1"));
     }
-    eprintln!(
+    stage!(
         "bonnetlab demo: generating the two-bonnet sample (seed {seed}) into {}",
         dir.display()
     );
@@ -314,10 +324,11 @@ fn generate_samples(dir: &Path, seed: u64, repeats: usize) -> Result<(), CliErro
             .map_err(werr)?;
     }
     for spec in recipe_samples::recipe_runs(RECIPE_SEED) {
-        eprintln!(
+        stage!(
             "bonnetlab demo: generating the {} recipe run (exact deposition under the vibration \
              model, seed {})",
-            spec.name, spec.seed
+            spec.name,
+            spec.seed
         );
         let run = recipe_samples::generate_run(&spec).map_err(|e| CliError {
             code: 1,
@@ -336,10 +347,10 @@ fn generate_samples(dir: &Path, seed: u64, repeats: usize) -> Result<(), CliErro
         .map_err(werr)?;
     set.commit().map_err(werr)?;
     for m in &maps {
-        eprintln!("  wrote {}", dir.join(m.relative_path()).display());
+        stage!("  wrote {}", dir.join(m.relative_path()).display());
     }
     for spec in recipe_samples::recipe_runs(RECIPE_SEED) {
-        eprintln!(
+        stage!(
             "  wrote {}",
             dir.join(spec.name).join("recipe.toml").display()
         );
@@ -370,7 +381,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         Some(dir) => dir,
         None if args.samples.is_dir() => &args.samples,
         None => {
-            eprintln!(
+            stage!(
                 "bonnetlab demo: no {} folder here; generating the samples into {}",
                 args.samples.display(),
                 generated.display()
@@ -381,7 +392,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     };
     let runs = sample_runs(samples)?;
     let n: usize = runs.iter().map(|r| r.before.len() + r.after.len()).sum();
-    eprintln!(
+    stage!(
         "bonnetlab demo: comparing {} runs ({n} maps) from {} at a {} mm grating spacing",
         runs.len(),
         samples.display(),
@@ -391,8 +402,8 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         pitch_mm: Some(SAMPLE_PITCH_MM),
         ..Settings::default()
     };
-    let c = compare_with_progress(&runs, &settings, true)?;
-    eprintln!(
+    let c = compare_with_progress(&runs, &settings, false)?;
+    stage!(
         "bonnetlab demo: predicting the MSF per bonnet (vibration coupling, {} mm raster)",
         SAMPLE_PITCH_MM
     );
@@ -403,7 +414,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             .iter()
             .map(|m| format!("{} {} %", m.name, fixed(100.0 * m.share, 1)))
             .collect();
-        eprintln!(
+        stage!(
             "  {}: predicted Y ripple sigma1 {} nm, MSF band RMS {:.4} nm ({})",
             p.bonnet,
             p.ripple_sigma1_nm
@@ -413,7 +424,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             shares.join(", ")
         );
     }
-    eprintln!("bonnetlab demo: rendering the report (maps, PSD overlays, tables)");
+    stage!("bonnetlab demo: rendering the report (maps, PSD overlays, tables)");
     let written = write_report_with(out, &c, Some(&predicted)).map_err(|e| CliError {
         code: 2,
         message: e.to_string(),
@@ -423,7 +434,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             .improvement_cr_rms
             .map(|v| format!(", improvement CR(RMS) {} %", fixed(100.0 * v, 2)))
             .unwrap_or_default();
-        eprintln!(
+        stage!(
             "  {}: RMS {:.3} -> {:.3} nm, CR(RMS) {:.2} %, CR(PV) {:.2} %{imp}",
             r.name,
             r.rms_before_nm,
@@ -433,7 +444,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         );
     }
     for p in &written {
-        eprintln!("  wrote {}", p.display());
+        stage!("  wrote {}", p.display());
     }
     let b = bonnet_comparison(samples, &out.join("bonnets"))?;
     let crs: Vec<String> = c
@@ -486,14 +497,15 @@ fn bonnet_comparison(samples: &Path, out: &Path) -> Result<String, CliError> {
         }
     }
     let args = bonnet_compare_args(samples, out);
-    eprintln!(
+    stage!(
         "bonnetlab demo: comparing the bonnets' recipe runs ({} and {}): calibration, vibration \
          forcing, attribution",
-        args.runs[0], args.runs[1]
+        args.runs[0],
+        args.runs[1]
     );
     let (runs, settings) = super::compare::parse(&args)?;
     let recipes = super::compare::recipe_runs(&args)?;
-    let c = compare_with_progress(&runs, &settings, true)?;
+    let c = compare_with_progress(&runs, &settings, false)?;
     let opts = crate::pipeline::bonnets::Options {
         remove: settings.remove.clone(),
         ..Default::default()
@@ -508,7 +520,7 @@ fn bonnet_comparison(samples: &Path, out: &Path) -> Result<String, CliError> {
             message: e.to_string(),
         })?;
     for p in &written {
-        eprintln!("  wrote {}", p.display());
+        stage!("  wrote {}", p.display());
     }
     Ok(match b.difference.first() {
         Some(d) => {

@@ -77,10 +77,21 @@ pub fn run(cli: Cli) -> i32 {
         Ok(()) => 0,
         Err(e) if e.is_closed_pipe() => 0,
         Err(e) => {
-            eprintln!("bonnetlab: {}", e.message.replace('\n', " "));
+            eprintln!("bonnetlab: {}", plain_message(&e.message));
             e.code
         }
     }
+}
+
+/// An error message as the user reads it: one line, without the libraries' "invalid
+/// argument: " tag after the file or flag it names (`--window: unknown window 'foo'`, not
+/// `--window: invalid argument: unknown window 'foo'`); the exit code already says bad input.
+pub fn plain_message(message: &str) -> String {
+    let one_line = message.replace(['\n', '\r'], " ");
+    let one_line = one_line
+        .strip_prefix("invalid argument: ")
+        .unwrap_or(&one_line);
+    one_line.replace(": invalid argument: ", ": ")
 }
 
 /// Writes bytes to stdout and flushes, checking every write: a failed write (`> /dev/full`) is

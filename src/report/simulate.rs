@@ -55,8 +55,25 @@ pub fn summary(out: &Path, r: &SimulationReport) -> String {
         ),
         None => String::new(),
     };
+    let sweep = match &r.spindle_sweep {
+        Some(rows) if !rows.is_empty() => {
+            let rpm = |f: fn(f64, f64) -> f64| {
+                rows.iter()
+                    .map(|row| row.spindle_rpm)
+                    .fold(rows[0].spindle_rpm, f)
+            };
+            format!(
+                "; spindle sweep ({} rows, {} to {} rpm) in {} and spindle_sweep.png",
+                rows.len(),
+                format::sig(rpm(f64::min), 6),
+                format::sig(rpm(f64::max), 6),
+                out.join("spindle_sweep.csv").display()
+            )
+        }
+        _ => String::new(),
+    };
     format!(
-        "simulate: wrote {} ({}, {} bonnet): RMS {} -> {} nm predicted (CR {} %, piston and tilt removed){ripple}",
+        "simulate: wrote {} ({}, {} bonnet): RMS {} -> {} nm predicted (CR {} %, piston and tilt removed){ripple}{sweep}",
         out.join("simulation.json").display(),
         r.mode,
         r.bonnet,

@@ -386,20 +386,25 @@ fn analyse_run(
          makes it disagree with the map RMS)",
         settings.window.name()
     );
+    // The PSD quantity over the same edges: absent, with the areal band's reason, where the
+    // maps cannot resolve the band (an annulus sum there would be of no bins, or of DC).
+    let psd_band = |m: &[MapResult], k: usize, v: fn(&MapResult) -> f64| {
+        areal(m, k).map(|_| mean(&each(m, v)))
+    };
     let bands_psd = vec![
         BandCr::new(
             "figure",
             (0.0, f1),
             method_2d.clone(),
-            Ok(mean(&each(mb, |m| m.figure_psd_nm))),
-            Ok(mean(&each(ma, |m| m.figure_psd_nm))),
+            psd_band(mb, 0, |m| m.figure_psd_nm),
+            psd_band(ma, 0, |m| m.figure_psd_nm),
         ),
         BandCr::new(
             "msf",
             (f1, msf_hi),
             method_2d,
-            Ok(mean(&each(mb, |m| m.msf_psd_nm))),
-            Ok(mean(&each(ma, |m| m.msf_psd_nm))),
+            psd_band(mb, 1, |m| m.msf_psd_nm),
+            psd_band(ma, 1, |m| m.msf_psd_nm),
         ),
     ];
     let band_rms = RunBandRms {
