@@ -43,9 +43,10 @@ fn thread_cpu_s() -> f64 {
 /// Issue #20: the minimum-dwell point at the issue's dwell budget (A 655 min, B 66 min), timed
 /// as one solve (shared start + healing + evaluation); the sweep that chose its offset is
 /// printed, not timed. Side by side in the same run: the FISTA healer as it was the default
-/// before (A 300 iterations, B 600, fine grid) and the ADMM healer (A: fine grid, 80
-/// iterations, the default; B: coarse dwell grid s = 5, 300 coarse iterations, no defect
-/// correction, 20 fine iterations). The median thread CPU time of 5 solves is printed
+/// before (A 300 iterations, B 600, fine grid) and the `dwell` CLI's default path
+/// (`MinDwellOptions::for_problem`: ADMM; A: fine grid, 80 iterations; B: coarse dwell grid
+/// s = 5 picked from the TIF's width, 300 coarse iterations, no defect correction, 20 fine
+/// iterations). The median thread CPU time of 5 solves is printed
 /// beside criterion's wall time.
 fn min_dwell(c: &mut Criterion) {
     let mut g = c.benchmark_group("dwell_min");
@@ -55,26 +56,21 @@ fn min_dwell(c: &mut Criterion) {
         healer: Healer::Fista,
         ..MinDwellOptions::default()
     };
-    let admm_fine = MinDwellOptions::default();
-    let admm_coarse = MinDwellOptions {
-        iterations: 300,
-        max_coarsening: 5,
-        corrections: 0,
-        fine_iterations: 20,
-        ..MinDwellOptions::default()
-    };
+    // `None`: the `dwell` CLI's default path, `MinDwellOptions::for_problem` (coarse grid from
+    // the TIF's width: A stays on the fine grid with 80 ADMM iterations, B gets s = 5 with 300
+    // coarse + 20 fine).
     for (name, label, budget_min, variants) in [
         (
             "rifta_case_a.toml",
             "case_a",
             655.0,
-            [("fista300", fista(300)), ("admm_fine80", admm_fine)],
+            [("fista300", Some(fista(300))), ("cli_default", None)],
         ),
         (
             "ibfest_case_b.toml",
             "case_b",
             66.0,
-            [("fista600", fista(600)), ("admm_coarse5", admm_coarse)],
+            [("fista600", Some(fista(600))), ("cli_default", None)],
         ),
     ] {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -85,6 +81,7 @@ fn min_dwell(c: &mut Criterion) {
         let cp = case.problem(&map).expect("case problem");
         let p = &cp.problem;
         for (variant, o) in variants {
+            let o = o.unwrap_or_else(|| MinDwellOptions::for_problem(p));
             let iterations = o.iterations;
             let mut md = MinDwell::new(p, &o).expect("start");
             let (s, curve) = md

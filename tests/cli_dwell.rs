@@ -19,6 +19,65 @@ fn case(name: &str) -> PathBuf {
     data_file("dwell", name)
 }
 
+/// The CLI's default settings (only the issue's dwell budget given) meet issue 20's targets on
+/// both public cases: the coarse dwell grid is picked from the TIF's width (A: fine grid, its
+/// TIF only 2.8 px RMS wide; B: nodes every 5 px), and `--coarsen 1` overrides it.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
+fn default_settings_meet_issue_20_targets_on_both_cases() {
+    for (name, budget_min, target_nm, coarsening) in [
+        ("rifta_case_a.toml", "655", 0.08, 1),
+        ("ibfest_case_b.toml", "66", 0.30, 5),
+    ] {
+        let o = bin()
+            .arg("dwell")
+            .arg(case(name))
+            .args(["--max-dwell-min", budget_min])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let rms = v["residual_rms_nm"].as_f64().unwrap();
+        let min = v["total_dwell_s"].as_f64().unwrap() / 60.0;
+        let budget: f64 = budget_min.parse().unwrap();
+        assert!(
+            rms > 0.0 && rms <= target_nm && min <= budget,
+            "{name}: {rms} nm with {min} min"
+        );
+        assert_eq!(v["target_met"], true);
+        assert_eq!(v["coarsening"], serde_json::json!([coarsening, coarsening]));
+    }
+    // The override: the full grid on case B (fewer iterations to keep the test short).
+    let o = bin()
+        .arg("dwell")
+        .arg(case("ibfest_case_b.toml"))
+        .args([
+            "--coarsen",
+            "1",
+            "--iterations",
+            "5",
+            "--max-dwell-min",
+            "66",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["coarsening"], serde_json::json!([1, 1]));
+    // A bad factor is a one-line usage error.
+    let o = bin()
+        .arg("dwell")
+        .arg(case("ibfest_case_b.toml"))
+        .args(["--coarsen", "zero"])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--coarsen"));
+}
+
 #[test]
 #[cfg_attr(
     no_shared_data,

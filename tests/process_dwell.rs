@@ -17,8 +17,8 @@ use shared_data::data_file;
 use bonnetlab::process::dwell::case::CaseProblem;
 use bonnetlab::process::dwell::feed::realise;
 use bonnetlab::process::dwell::{
-    solve_iterative, solve_rifta, DwellCase, DwellTarget, IterativeOptions, MinDwell,
-    MinDwellOptions, RiftaOptions,
+    auto_coarsening, solve_iterative, solve_rifta, tif_rms_width_px, DwellCase, DwellTarget,
+    IterativeOptions, MinDwell, MinDwellOptions, RiftaOptions,
 };
 use bonnetlab::process::fft::convolve_direct;
 use bonnetlab::process::removal::ExactOptions;
@@ -289,4 +289,32 @@ fn coarse_grid_with_admm_meets_case_b_targets() {
         "{} nm with {min} min",
         s.residual_rms_nm
     );
+}
+
+/// The automatic coarse dwell grid (`dwell --coarsen auto`): the TIF's RMS width is its Gaussian
+/// sigma in pixels (A 1.0 / 0.3615 = 2.77 px, B 1.1785 / 0.1 = 11.79 px), and floor(sigma / 2)
+/// gives A the fine grid and B nodes every 5 px.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
+fn auto_coarsening_follows_the_tif_width() {
+    for (name, sigma_px, s) in [
+        ("rifta_case_a.toml", 1.0 / 0.361515, 1),
+        ("ibfest_case_b.toml", 11.78519, 5),
+    ] {
+        let (_, p) = load(name);
+        let (w0, w1) = tif_rms_width_px(&p.problem.tif.rate_nm_per_s);
+        for w in [w0, w1] {
+            assert!(
+                (w / sigma_px - 1.0).abs() < 0.03,
+                "{name}: {w} vs {sigma_px}"
+            );
+        }
+        assert_eq!(auto_coarsening(&p.problem), s, "{name}");
+        let o = MinDwellOptions::for_problem(&p.problem);
+        assert_eq!(o.max_coarsening, s);
+        assert_eq!(o == MinDwellOptions::default(), s == 1);
+    }
 }

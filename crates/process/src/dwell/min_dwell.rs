@@ -24,8 +24,11 @@
 //! the fine objective's gradient at the current map, then `correction_iterations` coarse
 //! passes) and `fine_iterations` fine passes. With FISTA, case B at s = 5 stayed 0.3 % above
 //! the 0.30 nm target; with ADMM, 300 coarse iterations and 20 fine ones reach it (0.2997 nm)
-//! at ~0.07 s CPU (reports/performance_process.md). It stays off by default: on case A
-//! (TIF under 3 pixels wide) the coarse grid the tolerance admits (s = 2) is far too coarse.
+//! at ~0.07 s CPU (reports/performance_process.md). `MinDwellOptions::default()` keeps it off;
+//! [`MinDwellOptions::for_problem`] (what `bonnetlab dwell` uses) picks the factor from the
+//! TIF's width ([`auto_coarsening`]: its RMS width must span >= 2 coarse nodes), because on
+//! case A (TIF RMS width 2.8 px) even the coarse grid the spectral tolerance admits (s = 2) is
+//! far too coarse.
 //!
 //! Tried and dropped (see reports/performance_process.md): a scaled projection with RIFTA's
 //! Fourier preconditioner inside the projected step diverges (a non-diagonal metric with a
@@ -116,6 +119,98 @@ impl Default for MinDwellOptions {
             spline_order: 2,
             healer: Healer::ADMM_DEFAULT,
         }
+    }
+}
+
+/// The automatic coarse dwell grid needs the TIF's RMS width (per axis) to span at least this
+/// many coarse node spacings: s = floor(sigma_px / 2). At 2 node spacings a Gaussian TIF passes
+/// exp(-pi^2 2^2 / 2) ~ 3e-9 of its peak at the coarse Nyquist frequency, so the coarse map loses
+/// nothing the TIF could remove; case A (sigma 2.8 px) stays on the fine grid (s = 1), case B
+/// (sigma 11.8 px) gets s = 5.
+pub const AUTO_SIGMA_NODES: f64 = 2.0;
+/// Largest automatic coarsening factor.
+pub const AUTO_MAX_COARSENING: usize = 8;
+/// The clear aperture must span at least this many coarse nodes on each axis.
+pub const AUTO_MIN_CA_NODES: usize = 8;
+/// Below this many fine dwell-grid pixels the coarse grid saves too little to pay for its setup.
+pub const AUTO_MIN_PIXELS: usize = 64 * 64;
+
+/// The TIF's RMS width about its centroid, in pixels (rows, cols), from its rate array (second
+/// moment of |rate|).
+pub fn tif_rms_width_px(rate: &Array2<f64>) -> (f64, f64) {
+    let (mut w, mut m0, mut m1) = (0.0, 0.0, 0.0);
+    for ((i, j), &v) in rate.indexed_iter() {
+        let a = v.abs();
+        w += a;
+        m0 += a * i as f64;
+        m1 += a * j as f64;
+    }
+    if w <= 0.0 {
+        return (0.0, 0.0);
+    }
+    let (c0, c1) = (m0 / w, m1 / w);
+    let (mut v0, mut v1) = (0.0, 0.0);
+    for ((i, j), &v) in rate.indexed_iter() {
+        let a = v.abs();
+        v0 += a * (i as f64 - c0).powi(2);
+        v1 += a * (j as f64 - c1).powi(2);
+    }
+    ((v0 / w).sqrt(), (v1 / w).sqrt())
+}
+
+/// The coarse dwell-grid factor the automatic rule picks for `p` (1: the fine grid): the
+/// largest `s <= AUTO_MAX_COARSENING` with the TIF's RMS width >= `AUTO_SIGMA_NODES` node
+/// spacings on both axes and the clear aperture spanning >= `AUTO_MIN_CA_NODES` nodes on both
+/// axes; 1 when the dwell grid has fewer than `AUTO_MIN_PIXELS` pixels.
+pub fn auto_coarsening(p: &DwellProblem) -> usize {
+    let (rows, cols) = p.dim();
+    if rows * cols < AUTO_MIN_PIXELS {
+        return 1;
+    }
+    let (w0, w1) = tif_rms_width_px(&p.tif.rate_nm_per_s);
+    let by_tif = (w0.min(w1) / AUTO_SIGMA_NODES).floor().max(1.0) as usize;
+    // Clear-aperture extent per axis (pixels).
+    let extent = |axis: usize| {
+        let mut lo = usize::MAX;
+        let mut hi = 0;
+        for ((i, j), &a) in p.aperture.indexed_iter() {
+            if a {
+                let k = if axis == 0 { i } else { j };
+                lo = lo.min(k);
+                hi = hi.max(k);
+            }
+        }
+        if lo > hi {
+            0
+        } else {
+            hi - lo + 1
+        }
+    };
+    let by_ca = (extent(0).min(extent(1)) / AUTO_MIN_CA_NODES).max(1);
+    by_tif.min(by_ca).clamp(1, AUTO_MAX_COARSENING)
+}
+
+impl MinDwellOptions {
+    /// The defaults with coarse factor `s` (1: the fine grid, [`Self::default`]). With `s > 1`
+    /// the configuration that meets case B's targets in < 0.1 s: 300 ADMM iterations on the
+    /// coarse grid, no defect correction, 20 ADMM iterations on the fine grid.
+    pub fn with_coarsening(s: usize) -> MinDwellOptions {
+        let d = MinDwellOptions::default();
+        if s <= 1 {
+            return d;
+        }
+        MinDwellOptions {
+            iterations: 300,
+            max_coarsening: s,
+            corrections: 0,
+            fine_iterations: 20,
+            ..d
+        }
+    }
+
+    /// The defaults for `p`: [`Self::with_coarsening`] of [`auto_coarsening`].
+    pub fn for_problem(p: &DwellProblem) -> MinDwellOptions {
+        Self::with_coarsening(auto_coarsening(p))
     }
 }
 

@@ -33,7 +33,10 @@ use crate::tif::Tif;
 
 pub use case::DwellCase;
 pub use iterative::{solve_iterative, IterativeOptions};
-pub use min_dwell::{DwellTarget, Healer, MinDwell, MinDwellOptions};
+pub use min_dwell::{
+    auto_coarsening, tif_rms_width_px, DwellTarget, Healer, MinDwell, MinDwellOptions,
+    AUTO_SIGMA_NODES,
+};
 pub use rifta::{solve_rifta, RiftaOptions};
 
 /// A dwell problem on the dwell grid.
