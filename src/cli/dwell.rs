@@ -16,8 +16,9 @@
 //! within that budget), or neither (no extra removal); `--iterations` sets the healing
 //! iterations per point. The dwell map is solved on a coarse grid (nodes every `s` pixels,
 //! cubic B-spline onto the full grid, then 20 healing passes on the full grid) when the TIF is
-//! wide enough: `--coarsen auto` (default) takes the largest `s <= 8` with the TIF's RMS width
-//! >= 2 node spacings and the clear aperture >= 8 nodes across (`auto_coarsening`); case A
+//! wide enough: `--coarsen auto` (default) takes the largest `s <= 8` with the TIF's RMS
+//! width at least 2 node spacings and the clear aperture at least 8 nodes across
+//! (`auto_coarsening`); case A
 //! (TIF 2.8 px) stays on the full grid, case B (11.8 px) uses s = 5. `--coarsen N` overrides
 //! (1: the full grid). Every method's map is then realised as a
 //! raster feed under the case's `[machine]` limits and the executed residual reported (`feed`).
