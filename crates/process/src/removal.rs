@@ -171,14 +171,15 @@ pub fn tif_on_grid(tif: &Tif, grid: &Grid) -> Result<Tif, ProcessError> {
     }
 }
 
-/// Calls `f(u, v, w, shares)` for every sub-step (at most half a pixel) of `path` on `grid`:
-/// fractional row / column, dwell (s, times the rate weight) and its shares `[resting, along X,
-/// along Y]` (oblique motion split by cos^2 / sin^2 of its direction).
+/// Calls `f(u, v, w, dt, shares)` for every sub-step (at most half a pixel) of `path` on
+/// `grid`: fractional row / column, dwell (s, times the rate weight), the path's own dwell (s,
+/// no weight) and its shares `[resting, along X, along Y]` (oblique motion split by cos^2 /
+/// sin^2 of its direction).
 fn for_each_motion_substep(
     path: &PathLog,
     weights: Option<&[f64]>,
     grid: &Grid,
-    mut f: impl FnMut(f64, f64, f64, [f64; 3]),
+    mut f: impl FnMut(f64, f64, f64, f64, [f64; 3]),
 ) {
     let step = 0.5 * grid.dx_mm.min(grid.dy_mm);
     // A segment shorter than this is a resting tool (well below any sub-pixel structure).
@@ -194,7 +195,7 @@ fn for_each_motion_substep(
         } else {
             [0.0, ddx * ddx / len2, ddy * ddy / len2]
         };
-        f(u, v, w, shares);
+        f(u, v, w, dt, shares);
     });
 }
 
@@ -209,7 +210,7 @@ pub fn dwell_maps_by_motion(
 ) -> Result<[Option<Array2<f64>>; 3], ProcessError> {
     check_weights(path, weights)?;
     let mut maps: [Option<Array2<f64>>; 3] = [None, None, None];
-    for_each_motion_substep(path, weights, grid, |u, v, w, shares| {
+    for_each_motion_substep(path, weights, grid, |u, v, w, _, shares| {
         for (m, share) in maps.iter_mut().zip(shares) {
             if share > 0.0 {
                 let d = m.get_or_insert_with(|| Array2::zeros((grid.rows, grid.cols)));
@@ -257,6 +258,15 @@ const PHASE_KEY_STEPS: f64 = (1u32 << 20) as f64;
 /// Widest run of bins taken as one line phase (1/32 row).
 const MAX_PHASE_SPAN_BINS: usize = PHASE_BINS / 32;
 
+/// The coordinate across motion `kind` (1 along X: the row `u`; 2 along Y: the column `v`).
+fn across_of(kind: usize, u: f64, v: f64) -> f64 {
+    if kind == 1 {
+        u
+    } else {
+        v
+    }
+}
+
 /// Row and sub-row phase (0 <= phase < 1) of fractional row `u`, and the phase's histogram bin.
 fn row_phase(u: f64) -> (isize, f64, usize) {
     let n = u.floor();
@@ -275,27 +285,41 @@ struct LinePhases {
 
 /// The line phases of the along-X (`kind` 1: sub-row) or along-Y (`kind` 2: sub-column) dwell
 /// of `steps`, or `None` when there are more than [`MAX_PHASES`] or one spreads over more than
-/// 1/32 pixel (a path that wanders rather than a raster).
+/// 1/32 pixel (a path that wanders rather than a raster). Only sub-steps with at least
+/// [`MINOR_SHARE`] of their dwell in that motion count, and phases are weighted by the path's
+/// own dwell, not the rate weights: every weighting of one path has the same line phases (the
+/// same kernels, and a model linear in the weights).
 fn line_phases(steps: &[SubStep], kind: usize) -> Option<LinePhases> {
     let mut w_sum = vec![0.0f64; PHASE_BINS];
     let mut wp_sum = vec![0.0f64; PHASE_BINS];
-    let mut hit = vec![false; PHASE_BINS];
-    let mut any = false;
+    let mut all = 0.0;
     for st in steps {
-        if st.shares[kind] > 0.0 {
-            let (_, f, b) = row_phase(if kind == 1 { st.u } else { st.v });
-            let a = (st.w * st.shares[kind]).abs();
-            hit[b] = true;
-            any = true;
+        all += st.dt;
+        if st.shares[kind] >= MINOR_SHARE {
+            let (_, f, b) = row_phase(across_of(kind, st.u, st.v));
+            let a = st.dt * st.shares[kind];
             w_sum[b] += a;
             wp_sum[b] += a * f;
         }
     }
+    // A line phase is a run of bins holding at least LINE_BIN_SHARE of this motion's dwell
+    // each; the other bins are stray (a logged raster's corners, cut between samples, cross
+    // the rows) and go to the centred kernel, unless they hold more than STRAY_SHARE of the
+    // path's dwell.
+    let total: f64 = w_sum.iter().sum();
+    let floor = LINE_BIN_SHARE * total;
+    let hit: Vec<bool> = w_sum.iter().map(|&a| a > 0.0 && a >= floor).collect();
+    let stray: f64 = w_sum
+        .iter()
+        .zip(&hit)
+        .filter(|(_, &h)| !h)
+        .map(|(a, _)| a)
+        .sum();
+    if stray > STRAY_SHARE * all {
+        return None;
+    }
     let mut bin_cluster = vec![u8::MAX; PHASE_BINS];
     let mut phase = Vec::new();
-    if !any {
-        return Some(LinePhases { bin_cluster, phase });
-    }
     let mut b = 0;
     while b < PHASE_BINS {
         if !hit[b] {
@@ -310,17 +334,23 @@ fn line_phases(steps: &[SubStep], kind: usize) -> Option<LinePhases> {
             return None;
         }
         let (w, wp) = (start..b).fold((0.0, 0.0), |(x, y), k| (x + w_sum[k], y + wp_sum[k]));
-        let mean = if w > 0.0 {
-            wp / w
-        } else {
-            (start + b) as f64 / 2.0 / PHASE_BINS as f64
-        };
         bin_cluster[start..b].fill(phase.len() as u8);
-        phase.push(mean);
+        phase.push(wp / w);
     }
     Some(LinePhases { bin_cluster, phase })
 }
 
+/// Share of a sub-step's dwell in one motion below which it is a side-effect of motion along
+/// the other axis (a logged line's jitter, a step between lines): it has no line structure, so
+/// it is splatted cubically onto that motion's centred kernel (one map, no phase kernels). Its
+/// error there (at most ~2 % of the share's line profile at a steep footprint edge) is below
+/// 2e-4 of the sub-step's removal.
+const MINOR_SHARE: f64 = 1e-2;
+/// Least share of a motion's dwell in one sub-row phase bin for the bin to belong to a line.
+const LINE_BIN_SHARE: f64 = 1e-2;
+/// Most share of the path's dwell in phase bins outside the lines (splatted cubically onto the
+/// centred kernel, like [`MINOR_SHARE`] dwell); beyond it the fixed phase nodes are used.
+const STRAY_SHARE: f64 = 1e-2;
 /// Most distinct line phases given their own kernels (a raster whose pitch is a simple multiple
 /// of the pixel has one or a few); beyond it along-X dwell is splatted cubically across rows.
 const MAX_PHASES: usize = 8;
@@ -338,12 +368,13 @@ const PHASE_CACHE_BYTES: usize = 16 << 20;
 const MAX_POOLED_MAPS: usize = 8;
 
 /// One sub-step of the path on the grown grid: fractional row / column, dwell (s, times the
-/// rate weight) and its shares `[resting, along X, along Y]`.
+/// rate weight), the path's own dwell (s) and its shares `[resting, along X, along Y]`.
 #[derive(Debug, Clone, Copy)]
 struct SubStep {
     u: f64,
     v: f64,
     w: f64,
+    dt: f64,
     shares: [f64; 3],
 }
 
@@ -581,8 +612,14 @@ impl FastRemoval {
         // The path is walked once; its sub-steps are kept for the line phases and the splat.
         let mut steps = std::mem::take(&mut self.steps);
         steps.clear();
-        for_each_motion_substep(path, weights, &self.ext, |u, v, w, shares| {
-            steps.push(SubStep { u, v, w, shares })
+        for_each_motion_substep(path, weights, &self.ext, |u, v, w, dt, shares| {
+            steps.push(SubStep {
+                u,
+                v,
+                w,
+                dt,
+                shares,
+            })
         });
         let out = self.removal_of_steps(&steps);
         self.steps = steps;
@@ -618,9 +655,19 @@ impl FastRemoval {
                 if share <= 0.0 {
                     continue;
                 }
+                let (n, f, b) = row_phase(across_of(kind, u, v));
+                let stray = phases
+                    .as_ref()
+                    .is_some_and(|lp| lp.bin_cluster[b] == u8::MAX);
+                if share < MINOR_SHARE || stray {
+                    let d = maps[kind].get_or_insert_with(|| {
+                        pool.pop().unwrap_or_else(|| Array2::zeros((rows, cols)))
+                    });
+                    splat_cubic(d, u, v, w * share);
+                    continue;
+                }
                 // Across the motion: `n` whole pixels plus phase `f`; along it: `along`.
-                let (across, along) = if kind == 1 { (u, v) } else { (v, u) };
-                let (n, f, b) = row_phase(across);
+                let along = if kind == 1 { v } else { u };
                 let mut put = |maps: &mut Vec<Option<Array2<f64>>>, k: usize, n: isize, w: f64| {
                     let d = maps[k].get_or_insert_with(|| {
                         pool.pop().unwrap_or_else(|| Array2::zeros((rows, cols)))
@@ -633,11 +680,7 @@ impl FastRemoval {
                 };
                 match phases {
                     Some(lp) => {
-                        let k = slot
-                            .get(lp.bin_cluster[b] as usize)
-                            .copied()
-                            .unwrap_or(kind);
-                        put(&mut maps, k, n, w * share);
+                        put(&mut maps, slot[lp.bin_cluster[b] as usize], n, w * share);
                     }
                     None => {
                         let x = f * PHASE_NODES as f64;
