@@ -16,7 +16,7 @@ use crate::fft::Convolver;
 use crate::grid::Grid;
 use crate::interp::bilinear;
 use crate::path::PathLog;
-use crate::removal::{check_weights, keys_weights, FastRemoval};
+use crate::removal::{keys_weights, FastRemoval};
 use crate::tif::derived::{Channel, Derived};
 use crate::tif::{RateField, Tif};
 
@@ -182,8 +182,17 @@ pub fn weighted_dwell_maps(
     weights: &[Option<&[f64]>],
     grid: &Grid,
 ) -> Result<Vec<Option<Array2<f64>>>, ProcessError> {
-    for w in weights {
-        check_weights(path, *w)?;
+    for w in weights.iter().flatten() {
+        if w.len() != path.len() {
+            return Err(ProcessError::invalid(format!(
+                "{} weights for {} path samples",
+                w.len(),
+                path.len()
+            )));
+        }
+        if w.iter().any(|v| !v.is_finite()) {
+            return Err(ProcessError::invalid("path weights must be finite"));
+        }
     }
     let (r, c) = (grid.rows, grid.cols);
     let active: Vec<(usize, &[f64])> = weights

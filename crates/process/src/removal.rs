@@ -25,7 +25,7 @@ use crate::path::PathLog;
 use crate::tif::motion::{along_x_at_phase_sized, along_y_at_phase_sized, kernels_from_field};
 use crate::tif::{RateField, Tif};
 
-pub(crate) fn check_weights(path: &PathLog, weights: Option<&[f64]>) -> Result<(), ProcessError> {
+fn check_weights(path: &PathLog, weights: Option<&[f64]>) -> Result<(), ProcessError> {
     if let Some(w) = weights {
         if w.len() != path.len() {
             return Err(ProcessError::invalid(format!(
