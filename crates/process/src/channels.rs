@@ -200,10 +200,8 @@ pub fn weighted_dwell_maps(
         .enumerate()
         .filter_map(|(k, w)| w.map(|w| (k, w)))
         .collect();
-    // The channels interleaved per pixel (one cache line per tap for eight channels).
-    let na = active.len();
-    let mut acc = vec![0.0f64; r * c * na];
-    let mut ws = vec![0.0; na];
+    let mut maps: Vec<Array2<f64>> = active.iter().map(|_| Array2::zeros((r, c))).collect();
+    let mut ws = vec![0.0; active.len()];
     let step = 0.5 * grid.dx_mm.min(grid.dy_mm);
     path.for_each_substep(step, 0.0, |x, y, dt, k, fr| {
         let (u, v) = grid.frac_index(x, y);
@@ -226,14 +224,12 @@ pub fn weighted_dwell_maps(
                     continue;
                 }
                 let t = wi * wj;
-                let at = (i as usize * c + j as usize) * na;
-                for (m, o) in acc[at..at + na].iter_mut().zip(&ws) {
-                    *m += o * t;
+                for (m, o) in maps.iter_mut().zip(&ws) {
+                    m[(i as usize, j as usize)] += o * t;
                 }
             }
         }
     });
-    let maps = (0..na).map(|m| Array2::from_shape_fn((r, c), |(i, j)| acc[(i * c + j) * na + m]));
     let mut out: Vec<Option<Array2<f64>>> = vec![None; weights.len()];
     for ((k, _), m) in active.iter().zip(maps) {
         out[*k] = Some(m);

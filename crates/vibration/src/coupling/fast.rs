@@ -280,58 +280,7 @@ pub fn fast_maps(
         });
         Ok(Some(merger.finish()))
     };
-    // The derivative fields of the one TIF, sampled as the fast removal's moving-tool kernel
-    // (the one-pixel average along the path's dominant motion, process's
-    // `tif::motion::along_x_at_phase` / `along_y_at_phase` at phase 0), built in parallel and
-    // transformed into one shared FFT workspace while the vibration is integrated; the eight
-    // weighted dwell maps are then transformed once each and every mechanism map inverted
-    // once (the coupling is linear in the channels).
-    let (k_l, k_ll, k_lh) = Channel::lateral(p.lateral_axis == LateralAxis::X);
-    // (channel, weight) of each term, by mechanism: lateral jitter, normal offset, envelope,
-    // interaction.
-    let terms: [[(Channel, usize); 2]; 4] = [
-        [(k_l, 0), (k_ll, 1)],
-        [(Channel::Dh, 2), (Channel::Dhh, 3)],
-        [(Channel::Dh, 4), (Channel::Dhh, 5)],
-        [(Channel::Dhh, 6), (k_lh, 7)],
-    ];
-    let chans = [k_l, k_ll, Channel::Dh, Channel::Dhh, k_lh];
-    let workspace = || -> Result<Option<(MultiConvolver, Grid, usize, usize)>, VibrationError> {
-        if !any_vib {
-            return Ok(None);
-        }
-        let base: Arc<dyn RateField + Send> = Arc::new(input.tool.clone());
-        let step = 0.1 * g.dx_mm.min(g.dy_mm);
-        let along_x = along_x_dominant(&exec, &g);
-        let kernels: Vec<Tif> = chans
-            .par_iter()
-            .map(|&ch| {
-                let field = Derived::new(base.clone(), 1.0, ch, step).with_offset(law);
-                if along_x {
-                    along_x_at_phase(&field, g.dx_mm, g.dy_mm, 0.0)
-                } else {
-                    along_y_at_phase(&field, g.dx_mm, g.dy_mm, 0.0)
-                }
-            })
-            .collect::<Result<_, _>>()
-            .map_err(perr)?;
-        let (h0, h1) = kernels.iter().fold((0, 0), |(a, b), k| {
-            let (r, c) = k.half_widths();
-            (a.max(r), b.max(c))
-        });
-        let ext = g.grown(h0, h1);
-        let views: Vec<_> = kernels.iter().map(|k| k.rate_nm_per_s.view()).collect();
-        let conv = MultiConvolver::with_fft_size(
-            ext.rows,
-            ext.cols,
-            &views,
-            fast_len(ext.rows),
-            fast_len(ext.cols),
-        );
-        Ok(Some((conv, ext, h0, h1)))
-    };
-    let ((unperturbed, ws), blocks) =
-        rayon::join(|| rayon::join(unperturbed, workspace), vibration);
+    let (unperturbed, blocks) = rayon::join(unperturbed, vibration);
     let (baseline, dwell_execution) = unperturbed?;
     let mut maps = MechanismMaps {
         baseline,
@@ -341,14 +290,67 @@ pub fn fast_maps(
         envelope: zeros(),
         interaction: zeros(),
     };
-    let (Some(blocks), Some((mut conv, ext, h0, h1))) = (blocks?, ws?) else {
+    let Some(blocks) = blocks? else {
         return Ok(maps);
     };
-    if blocks.t.len() < 2 || !blocks.used.iter().any(|&u| u) {
+    if blocks.t.len() < 2 {
         return Ok(maps);
     }
     let Blocks { t, x, y, w, used } = blocks;
     let path = PathLog::new(t, x, y).map_err(perr)?;
+
+    // The derivative fields of the one TIF, sampled as the fast removal's moving-tool kernel
+    // (the one-pixel average along the path's dominant motion, process's
+    // `tif::motion::along_x_at_phase` / `along_y_at_phase` at phase 0), built in parallel; the
+    // eight weighted dwell maps (cubic splat of the blocks' path on the grown grid, process's
+    // `dwell_map_with`) convolved through one shared FFT workspace: one forward transform per
+    // weight map, one inverse per mechanism map (the coupling is linear in the channels).
+    let base: Arc<dyn RateField + Send> = Arc::new(input.tool.clone());
+    let step = 0.1 * g.dx_mm.min(g.dy_mm);
+    let (k_l, k_ll, k_lh) = Channel::lateral(p.lateral_axis == LateralAxis::X);
+    // (channel, weight) of each term, by mechanism: lateral jitter, normal offset, envelope,
+    // interaction.
+    let terms: [[(Channel, usize); 2]; 4] = [
+        [(k_l, 0), (k_ll, 1)],
+        [(Channel::Dh, 2), (Channel::Dhh, 3)],
+        [(Channel::Dh, 4), (Channel::Dhh, 5)],
+        [(Channel::Dhh, 6), (k_lh, 7)],
+    ];
+    let mut chans: Vec<Channel> = Vec::new();
+    for &(ch, c) in terms.iter().flatten() {
+        if used[c] && !chans.contains(&ch) {
+            chans.push(ch);
+        }
+    }
+    if chans.is_empty() {
+        return Ok(maps);
+    }
+    let along_x = along_x_dominant(&path, &g);
+    let kernels: Vec<Tif> = chans
+        .par_iter()
+        .map(|&ch| {
+            let field = Derived::new(base.clone(), 1.0, ch, step).with_offset(law);
+            if along_x {
+                along_x_at_phase(&field, g.dx_mm, g.dy_mm, 0.0)
+            } else {
+                along_y_at_phase(&field, g.dx_mm, g.dy_mm, 0.0)
+            }
+        })
+        .collect::<Result<_, _>>()
+        .map_err(perr)?;
+    let (h0, h1) = kernels.iter().fold((0, 0), |(a, b), k| {
+        let (r, c) = k.half_widths();
+        (a.max(r), b.max(c))
+    });
+    let ext = g.grown(h0, h1);
+    let views: Vec<_> = kernels.iter().map(|k| k.rate_nm_per_s.view()).collect();
+    let mut conv = MultiConvolver::with_fft_size(
+        ext.rows,
+        ext.cols,
+        &views,
+        fast_len(ext.rows),
+        fast_len(ext.cols),
+    );
     let wv: Vec<Option<&[f64]>> = (0..NV).map(|c| used[c].then_some(&w[c][..])).collect();
     let dwell = weighted_dwell_maps(&path, &wv, &ext).map_err(perr)?;
     let mut mech_map = |pair: &[(Channel, usize); 2]| -> Array2<f64> {
