@@ -16,7 +16,7 @@ use crate::fft::Convolver;
 use crate::grid::Grid;
 use crate::interp::bilinear;
 use crate::path::PathLog;
-use crate::removal::{keys_weights, FastRemoval};
+use crate::removal::FastRemoval;
 use crate::tif::derived::{Channel, Derived};
 use crate::tif::{RateField, Tif};
 
@@ -172,71 +172,6 @@ impl Channels {
     }
 }
 
-/// Weighted dwell maps (s per pixel) of one path on `grid`, several per-sample weight channels
-/// at once: map `c` is [`crate::removal::dwell_map_with`]`(path, weights[c], grid,
-/// Splat::Cubic)` up to rounding (sub-steps of at most half a pixel, weights linear between
-/// samples, 4 x 4 Keys cubic splat), `None` where `weights[c]` is; one pass over the sub-steps
-/// for all channels (the vibration coupling's eight weighted dwells).
-pub fn weighted_dwell_maps(
-    path: &PathLog,
-    weights: &[Option<&[f64]>],
-    grid: &Grid,
-) -> Result<Vec<Option<Array2<f64>>>, ProcessError> {
-    for w in weights.iter().flatten() {
-        if w.len() != path.len() {
-            return Err(ProcessError::invalid(format!(
-                "{} weights for {} path samples",
-                w.len(),
-                path.len()
-            )));
-        }
-        if w.iter().any(|v| !v.is_finite()) {
-            return Err(ProcessError::invalid("path weights must be finite"));
-        }
-    }
-    let (r, c) = (grid.rows, grid.cols);
-    let active: Vec<(usize, &[f64])> = weights
-        .iter()
-        .enumerate()
-        .filter_map(|(k, w)| w.map(|w| (k, w)))
-        .collect();
-    let mut maps: Vec<Array2<f64>> = active.iter().map(|_| Array2::zeros((r, c))).collect();
-    let mut ws = vec![0.0; active.len()];
-    let step = 0.5 * grid.dx_mm.min(grid.dy_mm);
-    path.for_each_substep(step, 0.0, |x, y, dt, k, fr| {
-        let (u, v) = grid.frac_index(x, y);
-        if !(u > -2.0 && v > -2.0 && u < r as f64 + 1.0 && v < c as f64 + 1.0) {
-            return;
-        }
-        for (o, (_, w)) in ws.iter_mut().zip(&active) {
-            *o = dt * (w[k] + fr * (w[k + 1] - w[k]));
-        }
-        let (i0, j0) = (u.floor() as isize, v.floor() as isize);
-        let (wu, wv) = (keys_weights(u - i0 as f64), keys_weights(v - j0 as f64));
-        for (a, wi) in wu.iter().enumerate() {
-            let i = i0 - 1 + a as isize;
-            if i < 0 || i as usize >= r {
-                continue;
-            }
-            for (b, wj) in wv.iter().enumerate() {
-                let j = j0 - 1 + b as isize;
-                if j < 0 || j as usize >= c {
-                    continue;
-                }
-                let t = wi * wj;
-                for (m, o) in maps.iter_mut().zip(&ws) {
-                    m[(i as usize, j as usize)] += o * t;
-                }
-            }
-        }
-    });
-    let mut out: Vec<Option<Array2<f64>>> = vec![None; weights.len()];
-    for ((k, _), m) in active.iter().zip(maps) {
-        out[*k] = Some(m);
-    }
-    Ok(out)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -333,32 +268,5 @@ mod tests {
                 h[k]
             );
         }
-    }
-
-    #[test]
-    fn weighted_dwell_maps_are_the_cubic_dwell_maps_of_each_weight() {
-        let (_, grid, path) = setup();
-        let n = path.len();
-        let a: Vec<f64> = (0..n).map(|k| (0.37 * k as f64).sin()).collect();
-        let b: Vec<f64> = (0..n).map(|k| 0.5 + (k % 7) as f64).collect();
-        let maps = weighted_dwell_maps(&path, &[Some(&a[..]), None, Some(&b[..])], &grid).unwrap();
-        assert!(maps[1].is_none());
-        for (m, w) in [(&maps[0], &a), (&maps[2], &b)] {
-            let want = crate::removal::dwell_map_with(
-                &path,
-                Some(&w[..]),
-                &grid,
-                crate::removal::Splat::Cubic,
-            );
-            let got = m.as_ref().unwrap();
-            let scale = want.iter().fold(0.0f64, |s, v| s.max(v.abs()));
-            let d = (got - &want).iter().fold(0.0f64, |s, v| s.max(v.abs()));
-            assert!(scale > 0.0 && d < 1e-12 * scale, "{d} vs {scale}");
-        }
-        // Wrong lengths and non-finite weights are errors.
-        assert!(weighted_dwell_maps(&path, &[Some(&a[1..])], &grid).is_err());
-        let mut bad = a.clone();
-        bad[3] = f64::NAN;
-        assert!(weighted_dwell_maps(&path, &[Some(&bad[..])], &grid).is_err());
     }
 }

@@ -42,15 +42,8 @@ fn path() -> PathLog {
     spec.generate().unwrap()
 }
 
-/// A Gaussian spot cut at 6 sigma (as `tests/coupling.rs`). Cut at 4 sigma (diameter 8 mm), the
-/// footprint's rim is a step of 3.4e-4 of the peak at r = 4 mm = 16 pixels, exactly on a pixel
-/// row of these on-row rasters: that row's removal is not analytic in the offset (the rim moves
-/// with it), so no second-order expansion matches the direct deposition there; the fast
-/// vibration part came out 10 % above direct in its mean (1.017 vs 0.917 nm at fn 5 N,
-/// ζ 0.05), the fit absorbed it as a rate scale of 1.054 and the 95 % forcing interval missed
-/// 5 N. At 6 sigma the means agree (0.916 vs 0.916 nm).
 fn tif(scale: f64) -> GaussianTif {
-    GaussianTif::new(1.0 * scale, 12.0 * scale, 1500.0 / (scale * scale)).unwrap()
+    GaussianTif::new(1.0 * scale, 8.0 * scale, 1500.0 / (scale * scale)).unwrap()
 }
 
 /// The robot at the x2 resonance (558 rpm), broadband force 0.5 N RMS, robot damping `zeta`.

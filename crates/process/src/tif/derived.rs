@@ -150,9 +150,6 @@ pub struct Derived {
     channel: Channel,
     step: f64,
     offset: Option<OffsetLaw>,
-    /// The law's (rate factor, footprint scale) at offset change +step and -step (computed
-    /// once: every offset channel evaluates the field there).
-    at_step: [(f64, f64); 2],
 }
 
 impl std::fmt::Debug for Derived {
@@ -175,14 +172,12 @@ impl Derived {
             channel,
             step: step.abs().max(1e-9),
             offset: None,
-            at_step: [(1.0, 1.0); 2],
         }
     }
 
     /// The same channel of a bonnet whose footprint follows `law` with the offset.
     pub fn with_offset(mut self, law: OffsetLaw) -> Self {
         self.offset = Some(law);
-        self.at_step = [law.factors(law.step_mm), law.factors(-law.step_mm)];
         self
     }
 
@@ -191,13 +186,7 @@ impl Derived {
         match &self.offset {
             None => self.base.rate_at_mm(x / s, y / s),
             Some(law) if delta != 0.0 => {
-                let (f, sc) = if delta == law.step_mm {
-                    self.at_step[0]
-                } else if delta == -law.step_mm {
-                    self.at_step[1]
-                } else {
-                    law.factors(delta)
-                };
+                let (f, sc) = law.factors(delta);
                 let w = s * sc;
                 f * self.base.rate_at_mm(x / w, y / w)
             }

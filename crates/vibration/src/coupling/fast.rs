@@ -1,20 +1,9 @@
 //! The fast coupling on the process crate's one removal model. The unperturbed removal (and
 //! the executed path's) is [`bonnetlab_process::removal::FastRemoval`]'s (motion-aware kernels,
 //! raster line phases); the vibration's part is a second-order expansion of the instantaneous
-//! TIF in the small displacements whose kernels are the derivative fields of the one TIF
-//! ([`bonnetlab_process::tif::derived`]'s channels, with the bonnet's offset law), sampled as
-//! the fast removal samples a moving tool (the one-pixel average along the path's dominant
-//! motion, point values across it: `tif::motion::along_x_at_phase` / `along_y_at_phase`), and
-//! whose dwell is weighted per sample (process's `channels::weighted_dwell_maps`, the cubic
-//! splat of the fast removal's dwell maps, all weights in one pass).
-//!
-//! Cost: the coupling is linear in the channels, so one FFT workspace holds the five channel
-//! kernels, every weighted dwell map is transformed once and every mechanism map inverted once
-//! (5 + 8 + 4 transforms of the grown grid); the kernels are built in parallel and the
-//! unperturbed removal runs while the vibration is integrated. The vibration's dwell is not
-//! split by motion kind or line phase as the unperturbed removal's is: the line changes (motion
-//! across the scan) take the scan's kernel and lines between pixel rows are interpolated
-//! cubically across rows, which `tests/coupling.rs` bounds against direct deposition.
+//! TIF in the small displacements whose terms are the same fast removal, run on the derivative
+//! fields of the one TIF ([`bonnetlab_process::tif::derived`]'s channels, with the bonnet's
+//! offset law) with the dwell weighted per sample.
 //!
 //! With q = x − p(t), u the lateral and δ = δ_det + δ_noise the offset displacement,
 //! T(q − u e_l; δ) ≈ T − u K_l + ½u² K_ll + δ K_h + ½δ² K_hh − u δ K_lh, so the vibration's
@@ -31,17 +20,13 @@ use super::stream::{CouplingSample, SampleStream};
 use super::{CouplingInput, CouplingOptions, MechanismMaps, Mechanisms};
 use crate::error::VibrationError;
 use crate::params::{LateralAxis, VibrationParams};
-use bonnetlab_process::channels::weighted_dwell_maps;
-use bonnetlab_process::fft::{fast_len, MultiConvolver};
-use bonnetlab_process::grid::Grid;
 use bonnetlab_process::path::kinematics::{apply_limits, Limits};
 use bonnetlab_process::path::PathLog;
 use bonnetlab_process::perturb::Axis;
+use bonnetlab_process::removal::FastRemoval;
 use bonnetlab_process::tif::derived::{Channel, Derived, OffsetLaw};
-use bonnetlab_process::tif::motion::{along_x_at_phase, along_y_at_phase};
-use bonnetlab_process::tif::{RateField, Tif};
-use ndarray::{s, Array2, ArrayView2};
-use rayon::prelude::*;
+use bonnetlab_process::tif::RateField;
+use ndarray::Array2;
 use std::sync::Arc;
 
 /// Weighted dwell channels: −u, ½u², δ_det, ½δ_det², δ_noise, ½δ_noise², δ_det δ_noise, −u δ.
@@ -95,25 +80,6 @@ pub fn axis(l: LateralAxis) -> Axis {
         LateralAxis::X => Axis::X,
         LateralAxis::Y => Axis::Y,
     }
-}
-
-/// Whether the path spends more of its moving time along X than along Y (segments split by
-/// cos² / sin² of their direction, as the fast removal's motion kinds).
-fn along_x_dominant(path: &PathLog, g: &Grid) -> bool {
-    let (mut ax, mut ay) = (0.0, 0.0);
-    for k in 0..path.len().saturating_sub(1) {
-        let (dx, dy) = (
-            (path.x_mm[k + 1] - path.x_mm[k]) / g.dx_mm,
-            (path.y_mm[k + 1] - path.y_mm[k]) / g.dy_mm,
-        );
-        let l2 = dx * dx + dy * dy;
-        if l2 > 0.0 {
-            let dt = path.t_s[k + 1] - path.t_s[k];
-            ax += dt * dx * dx / l2;
-            ay += dt * dy * dy / l2;
-        }
-    }
-    ax >= ay
 }
 
 fn perr(e: impl ToString) -> VibrationError {
@@ -236,52 +202,16 @@ pub fn fast_maps(
     let exec = executed_path(input, mech)?;
     let zeros = || Array2::<f64>::zeros((g.rows, g.cols));
 
+    // Unperturbed removal of the commanded path and of the executed one: the one fast model.
+    let mut fast = input.tool.fast_removal(&g).map_err(perr)?;
+    let baseline = fast.removal(input.path, None).map_err(perr)?;
+    let dwell_execution = if mech.dwell_execution {
+        fast.removal(&exec, None).map_err(perr)? - &baseline
+    } else {
+        zeros()
+    };
+    drop(fast);
     let any_vib = mech.normal_offset || mech.lateral_jitter || mech.envelope;
-    let law = offset_law(p)?;
-    // Unperturbed removal of the commanded path and of the executed one (the one fast model),
-    // alongside the vibration's integration (one thread integrates, one merges its samples).
-    let unperturbed = || -> Result<(Array2<f64>, Array2<f64>), VibrationError> {
-        let mut fast = input.tool.fast_removal(&g).map_err(perr)?;
-        let baseline = fast.removal(input.path, None).map_err(perr)?;
-        let dwell_execution = if mech.dwell_execution {
-            fast.removal(&exec, None).map_err(perr)? - &baseline
-        } else {
-            zeros()
-        };
-        Ok((baseline, dwell_execution))
-    };
-    let vibration = || -> Result<Option<Blocks>, VibrationError> {
-        if !any_vib {
-            return Ok(None);
-        }
-        let stream = SampleStream::new(&exec, p, bonnet, mech, opts.sample_hz, opts.seed)?;
-        let mut merger = Merger::new(exec.t_s[0], BLOCK_PX * g.dx_mm.min(g.dy_mm));
-        std::thread::scope(|scope| {
-            let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<CouplingSample>>(4);
-            scope.spawn(move || {
-                let mut buf = Vec::with_capacity(CHUNK);
-                for s in stream {
-                    buf.push(s);
-                    if buf.len() == CHUNK
-                        && tx
-                            .send(std::mem::replace(&mut buf, Vec::with_capacity(CHUNK)))
-                            .is_err()
-                    {
-                        return;
-                    }
-                }
-                let _ = tx.send(buf);
-            });
-            for chunk in rx {
-                for s in &chunk {
-                    merger.add(s);
-                }
-            }
-        });
-        Ok(Some(merger.finish()))
-    };
-    let (unperturbed, blocks) = rayon::join(unperturbed, vibration);
-    let (baseline, dwell_execution) = unperturbed?;
     let mut maps = MechanismMaps {
         baseline,
         dwell_execution,
@@ -290,85 +220,71 @@ pub fn fast_maps(
         envelope: zeros(),
         interaction: zeros(),
     };
-    let Some(blocks) = blocks? else {
+    if !any_vib {
         return Ok(maps);
-    };
+    }
+    let law = offset_law(p)?;
+
+    // Two-stage pipeline: one thread integrates the vibration, this one merges its samples.
+    let stream = SampleStream::new(&exec, p, bonnet, mech, opts.sample_hz, opts.seed)?;
+    let mut merger = Merger::new(exec.t_s[0], BLOCK_PX * g.dx_mm.min(g.dy_mm));
+    std::thread::scope(|scope| {
+        let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<CouplingSample>>(4);
+        scope.spawn(move || {
+            let mut buf = Vec::with_capacity(CHUNK);
+            for s in stream {
+                buf.push(s);
+                if buf.len() == CHUNK
+                    && tx
+                        .send(std::mem::replace(&mut buf, Vec::with_capacity(CHUNK)))
+                        .is_err()
+                {
+                    return;
+                }
+            }
+            let _ = tx.send(buf);
+        });
+        for chunk in rx {
+            for s in &chunk {
+                merger.add(s);
+            }
+        }
+    });
+    let blocks = merger.finish();
     if blocks.t.len() < 2 {
         return Ok(maps);
     }
     let Blocks { t, x, y, w, used } = blocks;
     let path = PathLog::new(t, x, y).map_err(perr)?;
 
-    // The derivative fields of the one TIF, sampled as the fast removal's moving-tool kernel
-    // (the one-pixel average along the path's dominant motion, process's
-    // `tif::motion::along_x_at_phase` / `along_y_at_phase` at phase 0), built in parallel; the
-    // eight weighted dwell maps (cubic splat of the blocks' path on the grown grid, process's
-    // `dwell_map_with`) convolved through one shared FFT workspace: one forward transform per
-    // weight map, one inverse per mechanism map (the coupling is linear in the channels).
+    // The derivative fields of the one TIF; each channel's workspace built when first needed.
     let base: Arc<dyn RateField + Send> = Arc::new(input.tool.clone());
     let step = 0.1 * g.dx_mm.min(g.dy_mm);
     let (k_l, k_ll, k_lh) = Channel::lateral(p.lateral_axis == LateralAxis::X);
-    // (channel, weight) of each term, by mechanism: lateral jitter, normal offset, envelope,
-    // interaction.
-    let terms: [[(Channel, usize); 2]; 4] = [
-        [(k_l, 0), (k_ll, 1)],
-        [(Channel::Dh, 2), (Channel::Dhh, 3)],
-        [(Channel::Dh, 4), (Channel::Dhh, 5)],
-        [(Channel::Dhh, 6), (k_lh, 7)],
-    ];
-    let mut chans: Vec<Channel> = Vec::new();
-    for &(ch, c) in terms.iter().flatten() {
-        if used[c] && !chans.contains(&ch) {
-            chans.push(ch);
+    let mut spaces: Vec<Option<FastRemoval>> = (0..Channel::ALL.len()).map(|_| None).collect();
+    let mut removal = |ch: Channel, c: usize| -> Result<Option<Array2<f64>>, VibrationError> {
+        if !used[c] {
+            return Ok(None);
         }
-    }
-    if chans.is_empty() {
-        return Ok(maps);
-    }
-    let along_x = along_x_dominant(&path, &g);
-    let kernels: Vec<Tif> = chans
-        .par_iter()
-        .map(|&ch| {
-            let field = Derived::new(base.clone(), 1.0, ch, step).with_offset(law);
-            if along_x {
-                along_x_at_phase(&field, g.dx_mm, g.dy_mm, 0.0)
-            } else {
-                along_y_at_phase(&field, g.dx_mm, g.dy_mm, 0.0)
+        let ws = match &mut spaces[ch.index()] {
+            Some(ws) => ws,
+            slot => {
+                let field = Derived::new(base.clone(), 1.0, ch, step).with_offset(law);
+                slot.insert(FastRemoval::from_field(&field, &g).map_err(perr)?)
             }
-        })
-        .collect::<Result<_, _>>()
-        .map_err(perr)?;
-    let (h0, h1) = kernels.iter().fold((0, 0), |(a, b), k| {
-        let (r, c) = k.half_widths();
-        (a.max(r), b.max(c))
-    });
-    let ext = g.grown(h0, h1);
-    let views: Vec<_> = kernels.iter().map(|k| k.rate_nm_per_s.view()).collect();
-    let mut conv = MultiConvolver::with_fft_size(
-        ext.rows,
-        ext.cols,
-        &views,
-        fast_len(ext.rows),
-        fast_len(ext.cols),
-    );
-    let wv: Vec<Option<&[f64]>> = (0..NV).map(|c| used[c].then_some(&w[c][..])).collect();
-    let dwell = weighted_dwell_maps(&path, &wv, &ext).map_err(perr)?;
-    let mut mech_map = |pair: &[(Channel, usize); 2]| -> Array2<f64> {
-        let mut inputs: Vec<Option<ArrayView2<f64>>> = vec![None; chans.len()];
-        for &(ch, c) in pair {
-            if let (Some(d), Some(k)) = (&dwell[c], chans.iter().position(|&x| x == ch)) {
-                inputs[k] = Some(d.view());
-            }
-        }
-        if inputs.iter().all(Option::is_none) {
-            return zeros();
-        }
-        let full = conv.apply_sum(&inputs);
-        full.slice(s![h0..h0 + g.rows, h1..h1 + g.cols]).to_owned()
+        };
+        ws.removal(&path, Some(&w[c])).map(Some).map_err(perr)
     };
-    maps.lateral_jitter = mech_map(&terms[0]);
-    maps.normal_offset = mech_map(&terms[1]);
-    maps.envelope = mech_map(&terms[2]);
-    maps.interaction = mech_map(&terms[3]);
+    let sum = |parts: [Option<Array2<f64>>; 2]| -> Array2<f64> {
+        let mut out = zeros();
+        for m in parts.into_iter().flatten() {
+            out += &m;
+        }
+        out
+    };
+    maps.lateral_jitter = sum([removal(k_l, 0)?, removal(k_ll, 1)?]);
+    maps.normal_offset = sum([removal(Channel::Dh, 2)?, removal(Channel::Dhh, 3)?]);
+    maps.envelope = sum([removal(Channel::Dh, 4)?, removal(Channel::Dhh, 5)?]);
+    maps.interaction = sum([removal(Channel::Dhh, 6)?, removal(k_lh, 7)?]);
     Ok(maps)
 }
