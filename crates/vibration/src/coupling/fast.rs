@@ -22,7 +22,6 @@ use crate::error::VibrationError;
 use crate::params::{LateralAxis, VibrationParams};
 use bonnetlab_process::path::kinematics::{apply_limits, Limits};
 use bonnetlab_process::path::PathLog;
-use bonnetlab_process::perturb::Axis;
 use bonnetlab_process::removal::FastRemoval;
 use bonnetlab_process::tif::derived::{Channel, Derived, OffsetLaw};
 use bonnetlab_process::tif::RateField;
@@ -69,16 +68,6 @@ pub fn lateral_unit(l: LateralAxis) -> (f64, f64) {
     match l {
         LateralAxis::X => (1.0, 0.0),
         LateralAxis::Y => (0.0, 1.0),
-    }
-}
-
-/// The process crate's [`Axis`] of the lateral displacement. Transitional: kept only for
-/// `src/pipeline/recipe_samples.rs` (with [`bonnetlab_process::perturb`]) until the lead ports
-/// it to [`lateral_unit`] and the modulated exact deposition.
-pub fn axis(l: LateralAxis) -> Axis {
-    match l {
-        LateralAxis::X => Axis::X,
-        LateralAxis::Y => Axis::Y,
     }
 }
 
