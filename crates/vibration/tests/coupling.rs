@@ -97,7 +97,7 @@ fn band_diff(input: &CouplingInput<'_>, a: &Array2<f64>, b: &Array2<f64>) -> f64
 /// h0 leave a third-order term of that order relative to the rectified second-order one
 /// (halving the forcing takes `normal_offset` alone from 0.80 % to 0.25 %).
 ///
-/// Why the previous model was 9 % off on the induced part (and this one 30 % high there, a 66 % difference, with
+/// Why the previous model was 9 % off on the induced part (and this one is 29 % off there with
 /// the footprint cut at 4 σ, while the total stays within 0.1 %): a Gaussian cut at 4 σ has a
 /// rate step of 3.4e-4 of its peak at the rim, and the rim moves with the offset. The spindle's
 /// offset oscillation (9.3 and 18.6 Hz, 0.17 and 0.086 mm along the path at 1.6 mm/s: below the
@@ -231,7 +231,7 @@ fn compare(input: &CouplingInput<'_>, axis: ScanAxis, opts: &CouplingOptions) ->
 /// The footprint cut at 4 σ (a rate step of 3.4e-4 of the peak at the rim): the total removal
 /// still agrees within 1 % (measured 0.09 % at 558 rpm, fn 3 N, noise 1.5 N), but the vibration's
 /// part does not (measured: fast 0.0177 nm, direct 0.0136 nm, difference 64 % for the
-/// `normal_offset` mechanism alone; 66 % with every mechanism on) because the rim moving with
+/// `normal_offset` mechanism alone; 29 % with every mechanism on) because the rim moving with
 /// the offset at the spindle frequency writes sub-pixel structure (see
 /// [`fast_coupling_vibration_part_agrees_with_direct_deposition`]). Asserted so the cause stays
 /// documented: the same run with the rim moved out to 6 σ agrees within 1 %.
