@@ -23,11 +23,13 @@ use crate::tif::{RateField, Tif};
 const CHANNELS: [Channel; 4] = [Channel::Value, Channel::Dx, Channel::Dy, Channel::Ds];
 
 fn slot(c: Channel) -> usize {
-    c.index()
+    match c {
+        Channel::Value => 0,
+        Channel::Dx => 1,
+        Channel::Dy => 2,
+        Channel::Ds => 3,
+    }
 }
-
-/// One workspace slot per channel.
-const SLOTS: usize = Channel::ALL.len();
 
 /// Removal workspaces of the channels of one TIF at one widening on one grid.
 pub struct Channels {
@@ -35,8 +37,8 @@ pub struct Channels {
     grid: Grid,
     scale: f64,
     step_mm: f64,
-    fast: [Option<FastRemoval>; SLOTS],
-    adjoint: [Option<Adjoint>; SLOTS],
+    fast: [Option<FastRemoval>; 4],
+    adjoint: [Option<Adjoint>; 4],
 }
 
 /// Correlation of a map with a channel's point-sampled kernel, on the grown grid.
@@ -70,8 +72,8 @@ impl Channels {
             scale,
             // A tenth of a pixel: the kernels sample the derivative, not a pixel difference.
             step_mm: 0.1 * grid.dx_mm.min(grid.dy_mm),
-            fast: std::array::from_fn(|_| None),
-            adjoint: std::array::from_fn(|_| None),
+            fast: [None, None, None, None],
+            adjoint: [None, None, None, None],
         };
         c.workspace(Channel::Value)?;
         Ok(c)

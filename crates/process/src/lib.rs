@@ -14,6 +14,7 @@ pub mod grid;
 pub mod interp;
 pub mod modulated;
 pub mod path;
+pub mod perturb;
 pub mod recipe;
 pub mod removal;
 pub mod simulate;

@@ -28,7 +28,6 @@ pub enum Mode {
 }
 
 /// A TIF ready for simulation: sampled at the map pitch, and the field exact deposition uses.
-#[derive(Clone)]
 pub enum ToolModel {
     Sampled(Tif),
     /// A measured spot: the field at the spot's own pixel, and its samples at the map pitch.

@@ -2,11 +2,12 @@
 //! 1 kHz): `cargo run --release -p bonnetlab-vibration --example profile_coupling`.
 
 use bonnetlab_process::path::RasterSpec;
+use bonnetlab_process::perturb::{DerivativeKernels, WeightedDwell};
 use bonnetlab_process::recipe::TifSource;
 use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::tif::GaussianTif;
 use bonnetlab_process::Grid;
-use bonnetlab_vibration::coupling::fast::executed_path;
+use bonnetlab_vibration::coupling::fast::{axis, executed_path, offset_tif};
 use bonnetlab_vibration::coupling::stream::SampleStream;
 use bonnetlab_vibration::coupling::{fast_maps, CouplingInput, CouplingOptions, Mechanisms};
 use bonnetlab_vibration::params::{Bonnet, VibrationParams};
@@ -30,6 +31,10 @@ fn main() {
     };
     let opts = CouplingOptions::default();
     let t = Instant::now();
+    let inst = offset_tif(&tif, &params);
+    let k = DerivativeKernels::sample(&inst, 0.1, 0.1, axis(params.lateral_axis));
+    eprintln!("kernels {:?} ({:?})", t.elapsed(), k.kh.dim());
+    let t = Instant::now();
     let exec = executed_path(&input, &Mechanisms::ALL).expect("exec");
     eprintln!("executed path {:?} ({} nodes)", t.elapsed(), exec.len());
     let t = Instant::now();
@@ -49,6 +54,22 @@ fn main() {
         acc += s.u_mm;
     }
     eprintln!("stream {:?} ({n} samples, {acc:.3e})", t.elapsed());
+    let t = Instant::now();
+    let ext = grid.grown(k.half.0, k.half.1);
+    let mut c8 = WeightedDwell::<8>::new(ext);
+    for s in SampleStream::new(
+        &exec,
+        &params,
+        Bonnet::Original,
+        &Mechanisms::ALL,
+        1000.0,
+        1,
+    )
+    .expect("stream")
+    {
+        c8.add(s.x_mm, s.y_mm, s.dt_s, &[s.u_mm; 8]);
+    }
+    eprintln!("stream + splat {:?}", t.elapsed());
     for _ in 0..2 {
         let t = Instant::now();
         let m = fast_maps(&input, Bonnet::Original, &opts).expect("fast");

@@ -15,10 +15,9 @@
 //! Cross terms between mechanisms are kept in `interaction`.
 //!
 //! [`fast`] takes the unperturbed removal from the process crate's fast removal model and the
-//! vibration's part from a second-order expansion: the same fast removal run on the TIF's
-//! derivative fields ([`bonnetlab_process::tif::derived`]) with weighted dwell; [`direct`]
-//! deposits the instantaneous TIF sub-step by sub-step through process's exact deposition (the
-//! reference, independent of the expansion). [`predict`] turns
+//! vibration's part from a second-order expansion (FFT convolutions of weighted dwell maps with
+//! derivative kernels, [`bonnetlab_process::perturb`]); [`direct`] deposits the instantaneous
+//! TIF sub-step by sub-step (the reference, independent of the expansion). [`predict`] turns
 //! the maps into the numbers `simulate` reports (MSF band RMS along Y per mechanism, shares,
 //! Y ripple σ1) and runs the spindle-speed sweep.
 

@@ -1,0 +1,477 @@
+//! Perturbation channels of the removal model: what a small displacement of the tool does to
+//! the removal, for the vibration coupling (and any caller that perturbs the tool around its
+//! commanded state).
+//!
+//! - [`OffsetTif`]: the instantaneous TIF at an offset change δ (mm, at the contact). The
+//!   contact radius is a(h) = sqrt(2 R h − h²); the footprint keeps its shape scaled by
+//!   a(h0 + δ) / a0 and the peak rate scales as ((h0 + δ) / h0)^γ:
+//!   T(q; δ) = ((h0 + δ) / h0)^γ · T0(q · a0 / a(h0 + δ)), T0 any [`RateField`]. A lateral
+//!   displacement u along a map axis e moves it: T(q − u e; δ).
+//! - [`DerivativeKernels`]: the derivative kernels of T for a second-order expansion in (u, δ):
+//!   K_l = ∂T/∂l, K_ll = ∂²T/∂l², K_h = ∂T/∂δ, K_hh = ∂²T/∂δ², K_lh = ∂²T/∂l∂δ, sampled on the
+//!   map pitch (finite differences of the continuous model: lateral ones over one pixel, offset
+//!   ones over 5 % of h0 on pixel-area means, because a footprint with a hard edge has an offset
+//!   derivative concentrated on its rim).
+//! - [`WeightedDwell`]: weighted dwell maps, N channels at once: every sample's dwell dt times a
+//!   weight per channel (u, u², δ, ...), bilinear splat (mass and centroid kept). Convolved with
+//!   the derivative kernels they give the perturbation's removal (see [`convolve_channels`]);
+//!   the unperturbed removal is [`crate::removal::FastRemoval`]'s.
+//! - [`deposit_perturbed`]: the exact reference, independent of the expansion: time-domain
+//!   deposition of T(q − u e; δ) sample by sample at every pixel of the footprint.
+//!
+//! Units: mm, s, nm/s; dwell in s per pixel; removal in nm.
+
+use std::borrow::Cow;
+
+use ndarray::{Array2, ArrayView2};
+use rayon::prelude::*;
+
+use crate::fft::{fast_len, MultiConvolver};
+use crate::grid::Grid;
+use crate::removal::deposit_one;
+use crate::tif::RateField;
+
+/// A map axis (the direction of a lateral displacement).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Axis {
+    X,
+    Y,
+}
+
+impl Axis {
+    /// Unit vector (x, y).
+    pub fn unit(self) -> (f64, f64) {
+        match self {
+            Axis::X => (1.0, 0.0),
+            Axis::Y => (0.0, 1.0),
+        }
+    }
+}
+
+/// The offset- and position-dependent removal rate of a bonnet whose offset changes by δ.
+#[derive(Clone, Copy)]
+pub struct OffsetTif<'a> {
+    base: &'a dyn RateField,
+    h0_mm: f64,
+    radius_mm: f64,
+    gamma: f64,
+    a0_mm: f64,
+}
+
+impl<'a> OffsetTif<'a> {
+    /// `base` is the TIF at the nominal offset `h0_mm` of a bonnet of radius `radius_mm`;
+    /// `pressure_exponent` is γ.
+    pub fn new(
+        base: &'a dyn RateField,
+        h0_mm: f64,
+        radius_mm: f64,
+        pressure_exponent: f64,
+    ) -> OffsetTif<'a> {
+        let a0 = (2.0 * radius_mm * h0_mm - h0_mm * h0_mm).max(1e-18).sqrt();
+        OffsetTif {
+            base,
+            h0_mm,
+            radius_mm,
+            gamma: pressure_exponent,
+            a0_mm: a0,
+        }
+    }
+
+    /// Nominal offset h0, mm.
+    pub fn h0_mm(&self) -> f64 {
+        self.h0_mm
+    }
+
+    /// Footprint scale a(h0 + δ) / a0 and rate factor at offset change δ.
+    fn scale(&self, delta_mm: f64) -> (f64, f64) {
+        let h = (self.h0_mm + delta_mm).max(1e-9);
+        let a = (2.0 * self.radius_mm * h - h * h).max(1e-18).sqrt();
+        (a / self.a0_mm, (h / self.h0_mm).powf(self.gamma))
+    }
+
+    /// Rate (nm/s) at offset (dx, dy) mm from the nominal tool centre, with offset change δ.
+    pub fn rate(&self, dx_mm: f64, dy_mm: f64, delta_mm: f64) -> f64 {
+        let (sc, f) = self.scale(delta_mm);
+        f * self.base.rate_at_mm(dx_mm / sc, dy_mm / sc)
+    }
+
+    /// The rate (nm/s) at offset change δ as a function of (dx, dy) mm (the scale factors
+    /// computed once).
+    pub fn at_offset(&self, delta_mm: f64) -> impl Fn(f64, f64) -> f64 + '_ {
+        let (sc, f) = self.scale(delta_mm);
+        let inv = 1.0 / sc;
+        move |dx, dy| f * self.base.rate_at_mm(dx * inv, dy * inv)
+    }
+
+    /// Half-extent (x, y) in mm for offset changes up to |δ| = `delta_max_mm`.
+    pub fn half_extent_mm(&self, delta_max_mm: f64) -> (f64, f64) {
+        let (ex, ey) = self.base.half_extent_mm();
+        let (sc, _) = self.scale(delta_max_mm.abs());
+        (ex * sc, ey * sc)
+    }
+}
+
+/// Offset step of the finite differences, as a fraction of h0 (the second-difference error is
+/// O(step²) relative: 0.25 % at 5 %).
+const OFFSET_STEP: f64 = 0.05;
+/// Sub-samples per pixel side for the offset kernels.
+const SUPERSAMPLE: usize = 6;
+
+/// The derivative kernels on a common (2 hy + 1) x (2 hx + 1) grid of pitch (dx, dy), centre
+/// at the middle pixel.
+#[derive(Debug, Clone)]
+pub struct DerivativeKernels {
+    pub kl: Array2<f64>,
+    pub kll: Array2<f64>,
+    pub kh: Array2<f64>,
+    pub khh: Array2<f64>,
+    pub klh: Array2<f64>,
+    /// Half widths in pixels (rows, cols).
+    pub half: (usize, usize),
+}
+
+impl DerivativeKernels {
+    pub fn sample(t: &OffsetTif<'_>, dx_mm: f64, dy_mm: f64, lateral: Axis) -> DerivativeKernels {
+        let eh = OFFSET_STEP * t.h0_mm;
+        let (ex, ey) = t.half_extent_mm(eh);
+        let hx = (ex / dx_mm).ceil() as usize + 2;
+        let hy = (ey / dy_mm).ceil() as usize + 2;
+        let shape = (2 * hy + 1, 2 * hx + 1);
+        let (lx, ly) = lateral.unit();
+        let el = match lateral {
+            Axis::X => dx_mm,
+            Axis::Y => dy_mm,
+        };
+        let n = SUPERSAMPLE;
+        let rows: Vec<Vec<[f64; 5]>> = (0..shape.0)
+            .into_par_iter()
+            .map(|i| {
+                let y = (i as f64 - hy as f64) * dy_mm;
+                let mut out = vec![[0.0; 5]; shape.1];
+                for (j, o) in out.iter_mut().enumerate() {
+                    let x = (j as f64 - hx as f64) * dx_mm;
+                    let at = |s: f64| t.rate(x + s * lx * el, y + s * ly * el, 0.0);
+                    // Pixel-area mean: the footprint edge moves continuously with δ, so the
+                    // offset derivatives of a footprint with a hard edge stay bounded.
+                    let avg = |s: f64, d: f64| {
+                        let mut acc = 0.0;
+                        for a in 0..n {
+                            let oy = ((a as f64 + 0.5) / n as f64 - 0.5) * dy_mm;
+                            for b in 0..n {
+                                let ox = ((b as f64 + 0.5) / n as f64 - 0.5) * dx_mm;
+                                acc += t.rate(x + ox + s * lx * el, y + oy + s * ly * el, d);
+                            }
+                        }
+                        acc / (n * n) as f64
+                    };
+                    let (c, p, m) = (at(0.0), at(1.0), at(-1.0));
+                    o[0] = (p - m) / (2.0 * el);
+                    o[1] = (p - 2.0 * c + m) / (el * el);
+                    let (ac, hp, hm) = (avg(0.0, 0.0), avg(0.0, eh), avg(0.0, -eh));
+                    o[2] = (hp - hm) / (2.0 * eh);
+                    o[3] = (hp - 2.0 * ac + hm) / (eh * eh);
+                    let dh = |s: f64| (avg(s, eh) - avg(s, -eh)) / (2.0 * eh);
+                    o[4] = (dh(1.0) - dh(-1.0)) / (2.0 * el);
+                }
+                out
+            })
+            .collect();
+        let pick = |c: usize| Array2::from_shape_fn(shape, |(i, j)| rows[i][j][c]);
+        DerivativeKernels {
+            kl: pick(0),
+            kll: pick(1),
+            kh: pick(2),
+            khh: pick(3),
+            klh: pick(4),
+            half: (hy, hx),
+        }
+    }
+
+    /// The kernels in the order of [`Derivative`].
+    pub fn views(&self) -> [ArrayView2<'_, f64>; 5] {
+        [
+            self.kl.view(),
+            self.kll.view(),
+            self.kh.view(),
+            self.khh.view(),
+            self.klh.view(),
+        ]
+    }
+}
+
+/// Which derivative kernel a weighted dwell channel is convolved with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Derivative {
+    L = 0,
+    Ll = 1,
+    H = 2,
+    Hh = 3,
+    Lh = 4,
+}
+
+/// `N` weighted dwell maps (s per pixel) on one grid, interleaved per pixel so one pass over the
+/// samples fills every channel.
+#[derive(Debug, Clone)]
+pub struct WeightedDwell<const N: usize> {
+    pub grid: Grid,
+    data: Vec<[f64; N]>,
+}
+
+impl<const N: usize> WeightedDwell<N> {
+    pub fn new(grid: Grid) -> Self {
+        WeightedDwell {
+            grid,
+            data: vec![[0.0; N]; grid.rows * grid.cols],
+        }
+    }
+
+    /// Adds dt · w[c] at (x, y) mm to every channel c, 2 x 2 bilinear weights (mass and
+    /// centroid kept; the fast removal's Keys cubic splat, which also keeps the second moment,
+    /// moved the coupling tests' fast − direct differences by at most 5e-6 nm, at four times
+    /// the work); points beyond the outer pixel centres are dropped.
+    pub fn add(&mut self, x_mm: f64, y_mm: f64, dt_s: f64, w: &[f64; N]) {
+        let g = &self.grid;
+        let (u, v) = g.frac_index(x_mm, y_mm);
+        if !(u > -1.0 && v > -1.0 && u < g.rows as f64 && v < g.cols as f64) {
+            return;
+        }
+        let (i0, j0) = (u.floor() as isize, v.floor() as isize);
+        let (fu, fv) = (u - i0 as f64, v - j0 as f64);
+        for (di, wi) in [(0isize, 1.0 - fu), (1, fu)] {
+            let i = i0 + di;
+            if i < 0 || i as usize >= g.rows {
+                continue;
+            }
+            for (dj, wj) in [(0isize, 1.0 - fv), (1, fv)] {
+                let j = j0 + dj;
+                if j >= 0 && (j as usize) < g.cols {
+                    let k = wi * wj * dt_s;
+                    let cell = &mut self.data[i as usize * g.cols + j as usize];
+                    for c in 0..N {
+                        cell[c] += k * w[c];
+                    }
+                }
+            }
+        }
+    }
+
+    /// Channel `c` as a map on the grid.
+    pub fn channel(&self, c: usize) -> Array2<f64> {
+        let g = &self.grid;
+        Array2::from_shape_fn((g.rows, g.cols), |(i, j)| self.data[i * g.cols + j][c])
+    }
+
+    /// True when channel `c` received nothing.
+    pub fn is_zero(&self, c: usize) -> bool {
+        self.data.iter().all(|v| v[c] == 0.0)
+    }
+}
+
+/// Convolution workspace of the derivative kernels on a dwell grid: `apply` sums channels, each
+/// with its kernel, through one inverse FFT ("same" mode on the dwell grid).
+pub struct KernelConvolver {
+    conv: MultiConvolver,
+}
+
+impl std::fmt::Debug for KernelConvolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "KernelConvolver({:?})", self.conv)
+    }
+}
+
+impl KernelConvolver {
+    /// For dwell maps on `dwell_grid` (the map grid grown by at least the kernels' half widths:
+    /// the transform is the dwell grid's size, so outputs inside the map grid are exact).
+    pub fn new(kernels: &DerivativeKernels, dwell_grid: &Grid) -> KernelConvolver {
+        let views = kernels.views();
+        KernelConvolver {
+            conv: MultiConvolver::with_fft_size(
+                dwell_grid.rows,
+                dwell_grid.cols,
+                &views,
+                fast_len(dwell_grid.rows),
+                fast_len(dwell_grid.cols),
+            ),
+        }
+    }
+
+    /// `sum (channel ⊛ kernel)` on the dwell grid.
+    pub fn apply(&mut self, terms: &[(&Array2<f64>, Derivative)]) -> Array2<f64> {
+        // Channels sharing a kernel are added first (one transform each kernel).
+        let mut sums: [Option<Cow<'_, Array2<f64>>>; 5] = Default::default();
+        for &(map, k) in terms {
+            match &mut sums[k as usize] {
+                Some(c) => *c.to_mut() += map,
+                s => *s = Some(Cow::Borrowed(map)),
+            }
+        }
+        let inputs: Vec<Option<ArrayView2<f64>>> =
+            sums.iter().map(|s| s.as_ref().map(|c| c.view())).collect();
+        self.conv.apply_sum(&inputs)
+    }
+}
+
+/// Convolves weighted dwell channels with the derivative kernels: `terms` lists (channel,
+/// kernel); the result is on the dwell grid. Convenience over [`KernelConvolver`].
+pub fn convolve_channels(
+    kernels: &DerivativeKernels,
+    dwell_grid: &Grid,
+    terms: &[(&Array2<f64>, Derivative)],
+) -> Array2<f64> {
+    KernelConvolver::new(kernels, dwell_grid).apply(terms)
+}
+
+/// One sample of a perturbed tool: centre (x, y) mm on the commanded path, dwell dt s, lateral
+/// displacement u mm along the lateral axis, offset change δ mm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PerturbedSample {
+    pub x_mm: f64,
+    pub y_mm: f64,
+    pub dt_s: f64,
+    pub u_mm: f64,
+    pub delta_mm: f64,
+}
+
+/// Exact time-domain deposition of the perturbed TIF T(q − u e; δ): every sample adds
+/// dt · T at every pixel of its footprint (no expansion, no splat), accumulated into `acc` (nm,
+/// on `grid`), in parallel. `delta_max_mm` bounds |δ| for the footprint extent.
+pub fn deposit_perturbed(
+    acc: &mut Array2<f64>,
+    grid: &Grid,
+    field: &OffsetTif<'_>,
+    lateral: Axis,
+    delta_max_mm: f64,
+    samples: &[PerturbedSample],
+) {
+    let (ex, ey) = field.half_extent_mm(delta_max_mm);
+    let (lx, ly) = lateral.unit();
+    let g = *grid;
+    let chunk = (samples.len() / (4 * rayon::current_num_threads()).max(1)).max(256);
+    let zero = || Array2::<f64>::zeros((g.rows, g.cols));
+    let part = samples
+        .par_chunks(chunk)
+        .map(|c| {
+            let mut a = zero();
+            for s in c {
+                let (cx, cy) = (s.x_mm + s.u_mm * lx, s.y_mm + s.u_mm * ly);
+                deposit_one(
+                    &mut a,
+                    &g,
+                    field.at_offset(s.delta_mm),
+                    cx,
+                    cy,
+                    s.dt_s,
+                    ex,
+                    ey,
+                );
+            }
+            a
+        })
+        .reduce(zero, |a, b| a + b);
+    *acc += &part;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tif::GaussianTif;
+
+    #[test]
+    fn offset_scaling_changes_volume_as_h_to_gamma_times_area() {
+        let g = GaussianTif::new(1.0, 8.0, 10.0).unwrap();
+        let (h0, r) = (0.6, 20.0);
+        let t = OffsetTif::new(&g, h0, r, 0.5);
+        let vol = |d: f64| {
+            let mut s = 0.0;
+            for i in -200..=200 {
+                for j in -200..=200 {
+                    s += t.rate(i as f64 * 0.025, j as f64 * 0.025, d) * 0.025 * 0.025;
+                }
+            }
+            s
+        };
+        let (v0, v1) = (vol(0.0), vol(0.03));
+        let a2 = |h: f64| 2.0 * r * h - h * h;
+        let expected = ((h0 + 0.03) / h0).powf(0.5) * a2(h0 + 0.03) / a2(h0);
+        assert!(
+            (v1 / v0 - expected).abs() < 1e-4,
+            "{} vs {expected}",
+            v1 / v0
+        );
+    }
+
+    #[test]
+    fn kernels_match_analytic_derivatives_of_a_gaussian() {
+        // Pure shift derivatives of a Gaussian: ∂x T = −x/σ² T, ∂²x T = (x²/σ⁴ − 1/σ²) T.
+        let sigma = 1.0;
+        let g = GaussianTif::new(sigma, 12.0, 5.0).unwrap();
+        let (h0, r) = (0.6, 20.0);
+        let t = OffsetTif::new(&g, h0, r, 0.5);
+        let dx = 0.05;
+        let k = DerivativeKernels::sample(&t, dx, dx, Axis::X);
+        let (hy, hx) = k.half;
+        for &(i, j) in &[(0isize, 10isize), (5, -20), (-7, 3)] {
+            let (x, y) = (j as f64 * dx, i as f64 * dx);
+            let tv = 5.0 * (-(x * x + y * y) / (2.0 * sigma * sigma)).exp();
+            let idx = ((hy as isize + i) as usize, (hx as isize + j) as usize);
+            assert!(
+                (k.kl[idx] - (-x * tv)).abs() < 2e-3 * 5.0,
+                "{} vs {}",
+                k.kl[idx],
+                -x * tv
+            );
+            assert!((k.kll[idx] - (x * x - 1.0) * tv).abs() < 5e-3 * 5.0);
+            // Offset derivative from the chain rule: T(q; δ) = f(δ) T0(q / s(δ)).
+            let ds = (r - h0) / (2.0 * r * h0 - h0 * h0); // d ln a / dh
+            let df = 0.5 / h0; // d ln f / dh
+            let dlnt = df + (x * x + y * y) / (sigma * sigma) * ds;
+            assert!(
+                (k.kh[idx] - dlnt * tv).abs() < 1e-2 * (dlnt * tv).abs().max(1e-2),
+                "{} vs {}",
+                k.kh[idx],
+                dlnt * tv
+            );
+        }
+    }
+
+    #[test]
+    fn weighted_dwell_keeps_mass_and_centroid_per_channel() {
+        let g = Grid::new(20, 20, 0.5, 0.25, 1.0, -2.0).unwrap();
+        let mut d = WeightedDwell::<2>::new(g);
+        d.add(4.37, 0.113, 2.0, &[1.0, -3.0]);
+        let (c0, c1) = (d.channel(0), d.channel(1));
+        let (mut m0, mut mx, mut my) = (0.0, 0.0, 0.0);
+        for ((i, j), &w) in c0.indexed_iter() {
+            m0 += w;
+            mx += w * g.x_mm(j);
+            my += w * g.y_mm(i);
+        }
+        assert!((m0 - 2.0).abs() < 1e-12);
+        assert!((mx / m0 - 4.37).abs() < 1e-12 && (my / m0 - 0.113).abs() < 1e-12);
+        assert!((c1.sum() + 6.0).abs() < 1e-12);
+        assert!(!d.is_zero(1));
+    }
+
+    #[test]
+    fn kernel_convolution_of_a_point_is_the_kernel() {
+        let g = GaussianTif::new(1.0, 6.0, 2.0).unwrap();
+        let t = OffsetTif::new(&g, 0.6, 20.0, 0.5);
+        let k = DerivativeKernels::sample(&t, 0.5, 0.5, Axis::Y);
+        let (hy, hx) = k.half;
+        let grid = Grid::new(2 * hy + 11, 2 * hx + 11, 0.5, 0.5, 0.0, 0.0).unwrap();
+        let mut a = Array2::zeros((grid.rows, grid.cols));
+        let (ci, cj) = (hy + 5, hx + 5);
+        a[(ci, cj)] = 2.0;
+        let mut b = Array2::zeros((grid.rows, grid.cols));
+        b[(ci, cj)] = 1.0;
+        let out = convolve_channels(&k, &grid, &[(&a, Derivative::H), (&b, Derivative::H)]);
+        let out2 = convolve_channels(&k, &grid, &[(&a, Derivative::Lh)]);
+        for di in 0..=2 * hy {
+            for dj in 0..=2 * hx {
+                let (i, j) = (ci + di - hy, cj + dj - hx);
+                assert!((out[(i, j)] - 3.0 * k.kh[(di, dj)]).abs() < 1e-9);
+                assert!((out2[(i, j)] - 2.0 * k.klh[(di, dj)]).abs() < 1e-9);
+            }
+        }
+    }
+}
