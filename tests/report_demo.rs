@@ -49,12 +49,14 @@ fn demo_report_equals_the_committed_example() {
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
-    // Progress is visible even without a terminal.
+    // Stage messages go to a terminal only (issue 17: a failing demo prints one line); the
+    // one success line on stdout gives each bonnet's convergence ratio.
+    assert!(err.is_empty(), "{err}");
+    let said = String::from_utf8_lossy(&o.stdout);
     assert!(
-        err.contains("analysed samples/original/before_1.dat"),
-        "{err}"
+        said.lines().count() == 1 && said.contains("original CR(RMS)"),
+        "{said}"
     );
-    assert!(err.contains("improvement CR(RMS)"), "{err}");
     // Numbers may differ in the last bits between debug and release builds (libm / powi),
     // so the JSON and CSVs are compared as numbers to 1e-9 relative; the HTML by presence.
     let read_json = |p: &Path| -> serde_json::Value {
@@ -92,7 +94,7 @@ fn demo_report_equals_the_committed_example() {
         "bonnets/report.json",
     );
     assert!(repo.join("reports/demo/bonnets/report.html").is_file());
-    assert!(err.contains("comparing the bonnets' recipe runs"), "{err}");
+    assert!(said.contains("bonnets/report.html"), "{said}");
     // The example shows what the paper's table shows: the suppression bonnet converges better,
     // beyond the repeat noise.
     let j: serde_json::Value =
