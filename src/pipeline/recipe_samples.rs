@@ -4,8 +4,8 @@
 //! ([`bonnetlab_calibrate::synth::generate_with`]: power-law textured part, a raster whose feed
 //! realises a dwell map, injected effects, misregistration, noise and dropouts) with the
 //! deposition replaced by [`VibrationDeposition`]: the exact time-domain deposition of the
-//! instantaneous TIF under the vibration model of the run's bonnet (process's
-//! `deposit_perturbed`, the same physics as `bonnetlab_vibration::coupling::direct_removal`),
+//! instantaneous TIF under the vibration model of the run's bonnet (the vibration coupling's
+//! direct reference `bonnetlab_vibration::coupling::Vibrating`, process's one exact deposition),
 //! with the generator's injected effects applied sample by sample (executed offset, rate
 //! factor).
 //!
@@ -29,12 +29,9 @@ use bonnetlab_calibrate::synth::{
 use bonnetlab_calibrate::CalibrateError;
 use bonnetlab_process::modulated::{Modulation, SubStep};
 use bonnetlab_process::path::kinematics::{apply_limits, Limits};
-use bonnetlab_process::perturb::{deposit_perturbed, OffsetTif, PerturbedSample};
 use bonnetlab_process::tif::{GaussianTif, RateField};
 use bonnetlab_process::{Grid, PathLog};
-use bonnetlab_vibration::coupling::fast::axis;
-use bonnetlab_vibration::coupling::stream::{CouplingSample, SampleStream};
-use bonnetlab_vibration::coupling::Mechanisms;
+use bonnetlab_vibration::coupling::{Mechanisms, Vibrating};
 use bonnetlab_vibration::params::{Bonnet, VibrationParams};
 use ndarray::Array2;
 
@@ -163,8 +160,9 @@ pub fn synth_config(spec: &RecipeRunSpec) -> SynthConfig {
 
 /// Exact time-domain deposition of the instantaneous TIF T(q − u e_l; δ) under the vibration
 /// model of `bonnet`, along the motion re-timed under the robot's acceleration limit, with the
-/// generator's modulation applied at every sub-step: the executed offset moves the tool
-/// centre, the rate factor scales the dwell. A footprint widening is not supported (error).
+/// generator's modulation applied at every sub-step on top of the vibration's: the executed
+/// offset moves the tool centre, the rate factor scales the rate, a widening widens the
+/// footprint (the vibration coupling's [`Vibrating::deposit`], process's one exact deposition).
 pub struct VibrationDeposition {
     pub params: VibrationParams,
     pub bonnet: Bonnet,
@@ -187,92 +185,29 @@ impl Deposition for VibrationDeposition {
         modulation: &dyn Fn(&SubStep) -> Modulation,
     ) -> Result<Array2<f64>, CalibrateError> {
         let p = &self.params;
-        let mech = Mechanisms::ALL;
         let limits = Limits {
             a_max_mm_per_s2: p.accel_max_mm_per_s2,
             ..Limits::default()
         };
         let exec = apply_limits(motion, &limits, 0.5 * grid.dx_mm.min(grid.dy_mm)).map_err(verr)?;
-        let inst = OffsetTif::new(field, p.offset_mm, p.bonnet_radius_mm, p.pressure_exponent);
-        let lateral = axis(p.lateral_axis);
-        let mut stream = SampleStream::new(&exec, p, self.bonnet, &mech, self.sample_hz, self.seed)
-            .map_err(verr)?;
-        let m = self.substeps.max(1) as f64;
-        let mut out = Array2::zeros((grid.rows, grid.cols));
-        let mut buf: Vec<PerturbedSample> = Vec::with_capacity(1 << 16);
-        let flush = |buf: &mut Vec<PerturbedSample>, out: &mut Array2<f64>| {
-            let dmax = buf.iter().fold(0.0f64, |a, s| a.max(s.delta_mm.abs()));
-            deposit_perturbed(out, grid, &inst, lateral, dmax, buf);
-            buf.clear();
+        let v = Vibrating {
+            params: p,
+            bonnet: self.bonnet,
+            mechanisms: Mechanisms::ALL,
+            sample_hz: self.sample_hz,
+            seed: self.seed,
+            substeps: self.substeps,
         };
-        let delta = |c: &CouplingSample| c.delta_det_mm + c.delta_noise_mm;
-        let mut t = exec.t_s[0];
-        let mut prev: Option<CouplingSample> = None;
-        let mut cur = stream.next();
-        let mut scale_err = false;
-        while let Some(c) = cur {
-            let next = stream.next();
-            let dt = c.dt_s / m;
-            // Velocity of the tool centre around this sample (central difference).
-            let (a, b) = (prev.unwrap_or(c), next.unwrap_or(c));
-            let span = if prev.is_some() { c.dt_s } else { 0.0 }
-                + if next.is_some() { c.dt_s } else { 0.0 };
-            let (vx, vy) = if span > 0.0 {
-                ((b.x_mm - a.x_mm) / span, (b.y_mm - a.y_mm) / span)
-            } else {
-                (0.0, 0.0)
-            };
-            for k in 0..self.substeps.max(1) {
-                // Offset of the sub-step from the sample's time, in sample intervals (−½..½);
-                // piecewise-linear between samples (as direct_removal).
-                let tau = (k as f64 + 0.5) / m - 0.5;
-                let (o, f) = match (tau < 0.0, &prev, &next) {
-                    (true, Some(a), _) => (*a, -tau),
-                    (false, _, Some(b)) => (*b, tau),
-                    _ => (c, 0.0),
-                };
-                let x = c.x_mm + f * (o.x_mm - c.x_mm);
-                let y = c.y_mm + f * (o.y_mm - c.y_mm);
-                let ts = t + (k as f64 + 0.5) * dt;
-                let seg = motion
-                    .t_s
-                    .partition_point(|&v| v <= ts)
-                    .clamp(1, motion.len() - 1)
-                    - 1;
-                let md = modulation(&SubStep {
-                    t_s: ts,
-                    x_mm: x,
-                    y_mm: y,
-                    vx_mm_per_s: vx,
-                    vy_mm_per_s: vy,
-                    segment: seg,
-                    dt_s: dt,
-                });
-                if (md.scale - 1.0).abs() > 1e-12 {
-                    scale_err = true;
-                }
-                buf.push(PerturbedSample {
-                    x_mm: x + md.dx_mm,
-                    y_mm: y + md.dy_mm,
-                    dt_s: dt * md.rate,
-                    u_mm: c.u_mm + f * (o.u_mm - c.u_mm),
-                    delta_mm: delta(&c) + f * (delta(&o) - delta(&c)),
-                });
-            }
-            t += c.dt_s;
-            if buf.len() >= (1 << 16) - self.substeps.max(1) {
-                flush(&mut buf, &mut out);
-            }
-            prev = Some(c);
-            cur = next;
-        }
-        flush(&mut buf, &mut out);
-        if scale_err {
-            return Err(verr(
-                "a footprint widening (tif_scale, growing_spot) is not supported",
-            ));
-        }
-        Ok(out)
+        // The generator's effects see the motion's segment at the executed path's time.
+        v.deposit(&exec, field, grid, |s| {
+            let seg = motion
+                .t_s
+                .partition_point(|&t| t <= s.t_s)
+                .clamp(1, motion.len() - 1)
+                - 1;
+            modulation(&SubStep { segment: seg, ..*s })
+        })
+        .map_err(verr)
     }
 }
 

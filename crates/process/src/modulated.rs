@@ -4,8 +4,10 @@
 //! spot shape or executed position vary in time or along the path in ways a per-sample weight
 //! cannot express (a spot that grows, a rate that depends on the travel direction or on where
 //! the tool is, a lag or a wiggle of the executed position). The synthetic-run generator uses
-//! it as its independent truth; it shares the deposition kernel and sub-stepping of
-//! `deposit_exact`, never the FFT model.
+//! it as its independent truth, and the vibration coupling as its direct reference (the
+//! instantaneous TIF under the robot's vibration, `bonnetlab_vibration::coupling::direct`),
+//! also the deposition of the bundled recipe runs; it shares the deposition kernel and
+//! sub-stepping of `deposit_exact`, never the FFT model.
 //!
 //! Footprint widening by `scale` s: the rate at offset r is `T(r / s)` (peak unchanged, volume
 //! times s^2), with the footprint's half-extent times s.
@@ -59,6 +61,19 @@ impl Default for Modulation {
     }
 }
 
+impl Modulation {
+    /// Both modulations at once: displacements add, rate factors and widenings multiply
+    /// (`T(r / s)` of a field already widened by `s'` is the field widened by `s s'`).
+    pub fn and(self, o: Modulation) -> Modulation {
+        Modulation {
+            dx_mm: self.dx_mm + o.dx_mm,
+            dy_mm: self.dy_mm + o.dy_mm,
+            rate: self.rate * o.rate,
+            scale: self.scale * o.scale,
+        }
+    }
+}
+
 /// A rate field widened by `s`: `T(r / s)`.
 struct Widened<'a> {
     inner: &'a dyn RateField,
@@ -75,13 +90,16 @@ impl RateField for Widened<'_> {
     }
 }
 
-/// Most sub-steps one deposition may take (memory bound of the step list).
-const MAX_SUBSTEPS: usize = 200_000_000;
+/// Sub-steps deposited per block (32 MB of steps), so memory stays bounded whatever the
+/// path's length.
+const BLOCK: usize = 1 << 20;
 
 /// Exact deposition (nm on `grid`) of `field` along `path`, modulated at every sub-step by
 /// `modulate`. Sub-steps as [`deposit_exact`](crate::removal::deposit_exact) (midpoint rule;
 /// default length a quarter pixel and at most 1/80 of the nominal footprint's smaller
-/// half-extent; at most `opts.max_dt_s` in time).
+/// half-extent; at most `opts.max_dt_s` in time). The hook is called once per sub-step, in
+/// time order, so it may follow a time series (the vibration coupling's instantaneous TIF:
+/// a lateral displacement, and an offset change as a rate factor and a widening).
 pub fn deposit_exact_modulated(
     path: &PathLog,
     field: &dyn RateField,
@@ -92,7 +110,34 @@ pub fn deposit_exact_modulated(
     let (ex, ey) = field.half_extent_mm();
     let step = exact_step(field, grid, opts)?;
     check_exact_budget(path, grid, step, opts, (ex, ey))?;
-    // (x, y, rate * dt, scale)
+    let g = *grid;
+    let zero = || Array2::<f64>::zeros((g.rows, g.cols));
+    // (x, y, rate * dt, scale), deposited in parallel block by block.
+    let flush = |steps: &[[f64; 4]], out: &mut Array2<f64>| {
+        let chunk = (steps.len() / (4 * rayon::current_num_threads()).max(1)).max(256);
+        let part = steps
+            .par_chunks(chunk)
+            .map(|c| {
+                let mut acc = zero();
+                for &[x, y, w, s] in c {
+                    let wf = Widened { inner: field, s };
+                    deposit_one(
+                        &mut acc,
+                        &g,
+                        |dx, dy| wf.rate_at_mm(dx, dy),
+                        x,
+                        y,
+                        w,
+                        ex * s,
+                        ey * s,
+                    );
+                }
+                acc
+            })
+            .reduce(zero, |a, b| a + b);
+        *out += &part;
+    };
+    let mut out = zero();
     let mut steps: Vec<[f64; 4]> = Vec::new();
     let mut bad: Option<String> = None;
     path.for_each_substep(step, opts.max_dt_s, |x, y, dt, k, fr| {
@@ -126,39 +171,19 @@ pub fn deposit_exact_modulated(
             && py >= grid.y0_mm - ry
             && py <= grid.y_mm(grid.rows - 1) + ry;
         if inside && m.rate != 0.0 {
-            if steps.len() >= MAX_SUBSTEPS {
-                bad = Some("modulated deposition would need more than 2e8 sub-steps".into());
-                return;
-            }
             steps.push([px, py, dt * m.rate, m.scale]);
+            if steps.len() == BLOCK {
+                flush(&steps, &mut out);
+                steps.clear();
+            }
         }
     });
     if let Some(b) = bad {
         return Err(ProcessError::invalid(b));
     }
-    let g = *grid;
-    let chunk = (steps.len() / (4 * rayon::current_num_threads()).max(1)).max(256);
-    let zero = || Array2::<f64>::zeros((g.rows, g.cols));
-    let out = steps
-        .par_chunks(chunk)
-        .map(|c| {
-            let mut acc = zero();
-            for &[x, y, w, s] in c {
-                let wf = Widened { inner: field, s };
-                deposit_one(
-                    &mut acc,
-                    &g,
-                    |dx, dy| wf.rate_at_mm(dx, dy),
-                    x,
-                    y,
-                    w,
-                    ex * s,
-                    ey * s,
-                );
-            }
-            acc
-        })
-        .reduce(zero, |a, b| a + b);
+    if !steps.is_empty() {
+        flush(&steps, &mut out);
+    }
     Ok(out)
 }
 

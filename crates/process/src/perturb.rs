@@ -16,8 +16,10 @@
 //!   weight per channel (u, u², δ, ...), bilinear splat (mass and centroid kept). Convolved with
 //!   the derivative kernels they give the perturbation's removal (see [`convolve_channels`]);
 //!   the unperturbed removal is [`crate::removal::FastRemoval`]'s.
-//! - [`deposit_perturbed`]: the exact reference, independent of the expansion: time-domain
-//!   deposition of T(q − u e; δ) sample by sample at every pixel of the footprint.
+//!
+//! The exact reference, independent of the expansion, is the process crate's one exact
+//! time-domain deposition, [`crate::modulated::deposit_exact_modulated`]: T(q − u e; δ) is the
+//! [`Modulation`] of [`OffsetTif::modulation`] with the displacement u e.
 //!
 //! Units: mm, s, nm/s; dwell in s per pixel; removal in nm.
 
@@ -28,7 +30,7 @@ use rayon::prelude::*;
 
 use crate::fft::{fast_len, MultiConvolver};
 use crate::grid::Grid;
-use crate::removal::deposit_one;
+use crate::modulated::Modulation;
 use crate::tif::RateField;
 
 /// A map axis (the direction of a lateral displacement).
@@ -87,6 +89,20 @@ impl<'a> OffsetTif<'a> {
         let h = (self.h0_mm + delta_mm).max(1e-9);
         let a = (2.0 * self.radius_mm * h - h * h).max(1e-18).sqrt();
         (a / self.a0_mm, (h / self.h0_mm).powf(self.gamma))
+    }
+
+    /// The instantaneous TIF at offset change δ and lateral displacement `u_mm` along
+    /// `lateral` as a modulation of the nominal one (rate factor, widening, displacement),
+    /// for the exact deposition.
+    pub fn modulation(&self, u_mm: f64, lateral: Axis, delta_mm: f64) -> Modulation {
+        let (sc, f) = self.scale(delta_mm);
+        let (lx, ly) = lateral.unit();
+        Modulation {
+            dx_mm: u_mm * lx,
+            dy_mm: u_mm * ly,
+            rate: f,
+            scale: sc,
+        }
     }
 
     /// Rate (nm/s) at offset (dx, dy) mm from the nominal tool centre, with offset change δ.
@@ -321,56 +337,6 @@ pub fn convolve_channels(
     KernelConvolver::new(kernels, dwell_grid).apply(terms)
 }
 
-/// One sample of a perturbed tool: centre (x, y) mm on the commanded path, dwell dt s, lateral
-/// displacement u mm along the lateral axis, offset change δ mm.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PerturbedSample {
-    pub x_mm: f64,
-    pub y_mm: f64,
-    pub dt_s: f64,
-    pub u_mm: f64,
-    pub delta_mm: f64,
-}
-
-/// Exact time-domain deposition of the perturbed TIF T(q − u e; δ): every sample adds
-/// dt · T at every pixel of its footprint (no expansion, no splat), accumulated into `acc` (nm,
-/// on `grid`), in parallel. `delta_max_mm` bounds |δ| for the footprint extent.
-pub fn deposit_perturbed(
-    acc: &mut Array2<f64>,
-    grid: &Grid,
-    field: &OffsetTif<'_>,
-    lateral: Axis,
-    delta_max_mm: f64,
-    samples: &[PerturbedSample],
-) {
-    let (ex, ey) = field.half_extent_mm(delta_max_mm);
-    let (lx, ly) = lateral.unit();
-    let g = *grid;
-    let chunk = (samples.len() / (4 * rayon::current_num_threads()).max(1)).max(256);
-    let zero = || Array2::<f64>::zeros((g.rows, g.cols));
-    let part = samples
-        .par_chunks(chunk)
-        .map(|c| {
-            let mut a = zero();
-            for s in c {
-                let (cx, cy) = (s.x_mm + s.u_mm * lx, s.y_mm + s.u_mm * ly);
-                deposit_one(
-                    &mut a,
-                    &g,
-                    field.at_offset(s.delta_mm),
-                    cx,
-                    cy,
-                    s.dt_s,
-                    ex,
-                    ey,
-                );
-            }
-            a
-        })
-        .reduce(zero, |a, b| a + b);
-    *acc += &part;
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -398,6 +364,29 @@ mod tests {
             "{} vs {expected}",
             v1 / v0
         );
+    }
+
+    #[test]
+    fn exact_deposition_of_the_modulation_is_the_instantaneous_tif() {
+        // A tool resting at one point with a constant offset change and lateral displacement:
+        // the one exact deposition, modulated, removes dt times T(q − u e; δ) at every pixel.
+        use crate::modulated::deposit_exact_modulated;
+        use crate::path::PathLog;
+        use crate::removal::ExactOptions;
+        let g = GaussianTif::new(1.0, 8.0, 10.0).unwrap();
+        let t = OffsetTif::new(&g, 0.6, 20.0, 0.5);
+        let grid = Grid::new(41, 41, 0.25, 0.25, -5.0, -5.0).unwrap();
+        let p = PathLog::new(vec![0.0, 2.0], vec![0.1, 0.1], vec![-0.2, -0.2]).unwrap();
+        let (u, d) = (0.3, 0.05);
+        let m = t.modulation(u, Axis::Y, d);
+        let r = deposit_exact_modulated(&p, &g, &grid, &ExactOptions::default(), |_| m).unwrap();
+        let mut worst = 0.0f64;
+        for ((i, j), v) in r.indexed_iter() {
+            let want = 2.0 * t.rate(grid.x_mm(j) - 0.1, grid.y_mm(i) + 0.2 - u, d);
+            worst = worst.max((v - want).abs());
+        }
+        assert!(worst < 1e-9, "{worst}");
+        assert!(r.sum() > 1.0);
     }
 
     #[test]

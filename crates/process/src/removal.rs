@@ -874,7 +874,7 @@ pub fn check_exact_budget(
 
 /// Adds `w` times the rate at every pixel within (ex, ey) mm of the tool centre (x, y);
 /// `rate(dx, dy)` is evaluated at the pixel's offset from the centre. Shared by the exact
-/// depositions (here and [`crate::perturb::deposit_perturbed`]).
+/// depositions (here and [`crate::modulated::deposit_exact_modulated`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn deposit_one(
     acc: &mut Array2<f64>,

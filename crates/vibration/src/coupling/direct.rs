@@ -1,20 +1,27 @@
-//! The reference: exact time-domain deposition of the instantaneous TIF T(q − u e_l; δ)
-//! (process's [`bonnetlab_process::perturb::deposit_perturbed`]) at every pixel of the
-//! footprint, with no expansion, no splat and no kernel: it shares nothing with the fast path
-//! but the vibration time series and the TIF model.
+//! The reference: exact time-domain deposition of the instantaneous TIF T(q − u e_l; δ) at
+//! every pixel of the footprint, with no expansion, no splat and no kernel: it shares nothing
+//! with the fast path but the vibration time series and the TIF model. It is the process
+//! crate's one exact deposition ([`deposit_exact_modulated`], the synthetic-run generator's
+//! truth) with the vibration as its modulation: at every sub-step the lateral displacement u
+//! moves the tool and the offset change δ sets the rate factor and the footprint's widening
+//! ([`bonnetlab_process::perturb::OffsetTif::modulation`]).
 //!
-//! Sub-steps: every coupling sample (the vibration generated at `sample_hz`) is split into
-//! `substeps` sub-steps; position and displacements between samples are the piecewise-linear
-//! interpolant through the samples (held constant before the first and after the last), so
-//! the deposition converges as `substeps` grows (halving the step is a test). Costly (pixels in
-//! the footprint x sub-steps): for validation runs, not for production.
+//! Sub-steps: at most 1/`substeps` of a coupling sample's interval (the vibration generated at
+//! `sample_hz`) in time, and the exact deposition's own bound in length; the displacements
+//! between samples are the piecewise-linear interpolant through the samples (held constant
+//! before the first and after the last, [`Track`]), so the deposition converges as `substeps`
+//! grows (halving the step is a test). Costly (pixels in the footprint x sub-steps): for
+//! validation runs and the synthetic truth, not for production.
 
 use super::fast::{axis, executed_path, offset_tif};
-use super::stream::{CouplingSample, SampleStream};
-use super::{CouplingInput, CouplingOptions};
+use super::stream::{SampleStream, Track};
+use super::{CouplingInput, CouplingOptions, Mechanisms};
 use crate::error::VibrationError;
-use crate::params::Bonnet;
-use bonnetlab_process::perturb::{deposit_perturbed, PerturbedSample};
+use crate::params::{Bonnet, VibrationParams};
+use bonnetlab_process::modulated::{deposit_exact_modulated, Modulation, SubStep};
+use bonnetlab_process::removal::ExactOptions;
+use bonnetlab_process::tif::RateField;
+use bonnetlab_process::{Grid, PathLog};
 use ndarray::Array2;
 
 /// Default sub-steps per coupling sample.
@@ -37,67 +44,71 @@ pub fn direct_removal_with(
     opts: &CouplingOptions,
     substeps: usize,
 ) -> Result<Array2<f64>, VibrationError> {
-    if substeps == 0 {
-        return Err(VibrationError::InvalidArgument(
-            "direct deposition needs at least one sub-step per sample".into(),
-        ));
-    }
-    let p = input.params;
-    let g = input.grid;
-    let inst = offset_tif(input.tool.field(), p);
-    let lateral = axis(p.lateral_axis);
     let exec = executed_path(input, &opts.mechanisms)?;
-    let mut stream = SampleStream::new(
-        &exec,
-        p,
+    let v = Vibrating {
+        params: input.params,
         bonnet,
-        &opts.mechanisms,
-        opts.sample_hz,
-        opts.seed,
-    )?;
-    let mut out = Array2::zeros((g.rows, g.cols));
-    let mut buf: Vec<PerturbedSample> = Vec::with_capacity(1 << 16);
-    let flush = |buf: &mut Vec<PerturbedSample>, out: &mut Array2<f64>| {
-        let dmax = buf.iter().fold(0.0f64, |m, s| m.max(s.delta_mm.abs()));
-        deposit_perturbed(out, &g, &inst, lateral, dmax, buf);
-        buf.clear();
+        mechanisms: opts.mechanisms,
+        sample_hz: opts.sample_hz,
+        seed: opts.seed,
+        substeps,
     };
-    let m = substeps as f64;
-    let lerp = |a: &CouplingSample, b: &CouplingSample, f: f64, dt: f64| PerturbedSample {
-        x_mm: a.x_mm + f * (b.x_mm - a.x_mm),
-        y_mm: a.y_mm + f * (b.y_mm - a.y_mm),
-        dt_s: dt,
-        u_mm: a.u_mm + f * (b.u_mm - a.u_mm),
-        delta_mm: (a.delta_det_mm + a.delta_noise_mm)
-            + f * ((b.delta_det_mm + b.delta_noise_mm) - (a.delta_det_mm + a.delta_noise_mm)),
-    };
-    let mut prev: Option<CouplingSample> = None;
-    let mut cur = stream.next();
-    while let Some(c) = cur {
-        let next = stream.next();
-        let dt = c.dt_s / m;
-        for k in 0..substeps {
-            // Offset of the sub-step from the sample's time, in sample intervals (−½..½).
-            let tau = (k as f64 + 0.5) / m - 0.5;
-            let s = if tau < 0.0 {
-                match &prev {
-                    Some(a) => lerp(&c, a, -tau, dt),
-                    None => lerp(&c, &c, 0.0, dt),
-                }
-            } else {
-                match &next {
-                    Some(b) => lerp(&c, b, tau, dt),
-                    None => lerp(&c, &c, 0.0, dt),
-                }
-            };
-            buf.push(s);
+    v.deposit(&exec, input.tool.field(), &input.grid, |_| {
+        Modulation::default()
+    })
+}
+
+/// A vibrating tool for the exact deposition: the vibration model of `bonnet` with the
+/// `mechanisms` switched on, sampled at `sample_hz` with `seed`.
+#[derive(Debug, Clone, Copy)]
+pub struct Vibrating<'a> {
+    pub params: &'a VibrationParams,
+    pub bonnet: Bonnet,
+    pub mechanisms: Mechanisms,
+    pub sample_hz: f64,
+    pub seed: u64,
+    /// Sub-steps per vibration sample (at least 1).
+    pub substeps: usize,
+}
+
+impl Vibrating<'_> {
+    /// Exact deposition (nm on `grid`) of `field` (the TIF at the nominal offset) moved along
+    /// `path` (the path the robot executes: [`executed_path`] re-times it when
+    /// `dwell_execution` is on) under the vibration, with the caller's own modulation `also`
+    /// applied at every sub-step on top of it (displacements add, rate factors and widenings
+    /// multiply).
+    pub fn deposit(
+        &self,
+        path: &PathLog,
+        field: &dyn RateField,
+        grid: &Grid,
+        mut also: impl FnMut(&SubStep) -> Modulation,
+    ) -> Result<Array2<f64>, VibrationError> {
+        if self.substeps == 0 {
+            return Err(VibrationError::InvalidArgument(
+                "direct deposition needs at least one sub-step per sample".into(),
+            ));
         }
-        if buf.len() >= (1 << 16) - substeps {
-            flush(&mut buf, &mut out);
-        }
-        prev = Some(c);
-        cur = next;
+        let p = self.params;
+        let inst = offset_tif(field, p);
+        let lateral = axis(p.lateral_axis);
+        let stream = SampleStream::new(
+            path,
+            p,
+            self.bonnet,
+            &self.mechanisms,
+            self.sample_hz,
+            self.seed,
+        )?;
+        let opts = ExactOptions {
+            max_step_mm: None,
+            max_dt_s: stream.dt_s() / self.substeps as f64,
+        };
+        let mut track = Track::new(stream);
+        deposit_exact_modulated(path, field, grid, &opts, |s| {
+            let d = track.at(s.t_s);
+            inst.modulation(d.u_mm, lateral, d.delta_mm).and(also(s))
+        })
+        .map_err(|e| VibrationError::Process(e.to_string()))
     }
-    flush(&mut buf, &mut out);
-    Ok(out)
 }

@@ -17,7 +17,8 @@
 //! [`fast`] takes the unperturbed removal from the process crate's fast removal model and the
 //! vibration's part from a second-order expansion (FFT convolutions of weighted dwell maps with
 //! derivative kernels, [`bonnetlab_process::perturb`]); [`direct`] deposits the instantaneous
-//! TIF sub-step by sub-step (the reference, independent of the expansion). [`predict`] turns
+//! TIF sub-step by sub-step with the process crate's one exact deposition (the reference,
+//! independent of the expansion). [`predict`] turns
 //! the maps into the numbers `simulate` reports (MSF band RMS along Y per mechanism, shares,
 //! Y ripple σ1) and runs the spindle-speed sweep.
 
@@ -32,7 +33,7 @@ use bonnetlab_process::{Grid, PathLog};
 use ndarray::Array2;
 use serde::Serialize;
 
-pub use direct::{direct_removal, direct_removal_with};
+pub use direct::{direct_removal, direct_removal_with, Vibrating};
 pub use fast::fast_maps;
 pub use predict::{
     predict, predict_both, spindle_sweep, BonnetPrediction, MechanismResult, SweepRow,

@@ -173,3 +173,71 @@ impl Iterator for SampleStream<'_> {
         Some(s)
     }
 }
+
+impl SampleStream<'_> {
+    /// Interval of one sample, s.
+    pub fn dt_s(&self) -> f64 {
+        self.dt
+    }
+}
+
+/// The vibration displacements at any time along the path: piecewise-linear through the
+/// stream's samples (each at the middle of its interval), held before the first and after the
+/// last. Times asked must not decrease (the stream is integrated once, forward).
+pub struct Track<'a> {
+    stream: SampleStream<'a>,
+    a: Option<(f64, CouplingSample)>,
+    b: Option<(f64, CouplingSample)>,
+}
+
+/// Lateral displacement u and offset change δ = δ_det + δ_noise (mm) at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Displacement {
+    pub u_mm: f64,
+    pub delta_mm: f64,
+}
+
+impl<'a> Track<'a> {
+    pub fn new(stream: SampleStream<'a>) -> Track<'a> {
+        let mut t = Track {
+            stream,
+            a: None,
+            b: None,
+        };
+        t.b = t.pull();
+        t
+    }
+
+    fn pull(&mut self) -> Option<(f64, CouplingSample)> {
+        let s = self.stream.next()?;
+        let t = self.stream.t0 + (self.stream.k as f64 - 0.5) * self.stream.dt;
+        Some((t, s))
+    }
+
+    /// The displacements at time `t_s` (the path's clock).
+    pub fn at(&mut self, t_s: f64) -> Displacement {
+        while matches!(self.b, Some((tb, _)) if tb <= t_s) {
+            self.a = self.b.take();
+            self.b = self.pull();
+        }
+        let d = |s: &CouplingSample| Displacement {
+            u_mm: s.u_mm,
+            delta_mm: s.delta_det_mm + s.delta_noise_mm,
+        };
+        match (&self.a, &self.b) {
+            (Some((ta, a)), Some((tb, b))) => {
+                let (da, db) = (d(a), d(b));
+                let f = (t_s - ta) / (tb - ta);
+                Displacement {
+                    u_mm: da.u_mm + f * (db.u_mm - da.u_mm),
+                    delta_mm: da.delta_mm + f * (db.delta_mm - da.delta_mm),
+                }
+            }
+            (Some((_, s)), None) | (None, Some((_, s))) => d(s),
+            (None, None) => Displacement {
+                u_mm: 0.0,
+                delta_mm: 0.0,
+            },
+        }
+    }
+}
