@@ -672,8 +672,10 @@ pub fn generate_with(
         )
         .map_err(perr)
     };
-    let m0_px = ((6.0 * d + 2.0) / td).ceil() as usize;
-    let m_px = (((reach + 4.0 * d + 2.0) / td).ceil() as usize).max(m0_px);
+    let margin_px = |reach: f64| ((reach + 4.0 * d + 2.0) / td).ceil() as usize;
+    // (2 d is the reach without a registration: the same arithmetic as `reach` above.)
+    let m0_px = margin_px(2.0 * d);
+    let m_px = margin_px(reach).max(m0_px);
     let cg = truth_grid(m0_px)?;
     let tg = truth_grid(m_px)?;
     let extend = |a: &Array2<f64>| periodic_extend(a, m_px - m0_px, tg.rows, tg.cols);
