@@ -199,9 +199,9 @@ fn recipe_commands_run_as_written() {
     }
     // calibrate finds the suppression run's built-in path offset (0.3, -0.25) mm. (`calibrate`
     // has no vibration model: on the original run it first takes a periodic x error of 6 mm
-    // period along y, which it also finds on the suppression run, and the 0.3 mm direction lag
-    // is then no longer significant; `compare`, which models the vibration, finds the lag:
-    // tests/samples.rs.)
+    // period along y (no longer on the suppression run, since the texture-exponent-3 samples),
+    // and the 0.3 mm direction lag is then no longer significant; `compare`, which models the
+    // vibration, finds the lag: tests/samples.rs.)
     let cal: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("out/calibration.json")).unwrap())
             .unwrap();

@@ -258,7 +258,7 @@ fn recipe_readme() -> String {
          seed {seed}) with its deposition replaced by the exact time-domain deposition of the \
          instantaneous TIF under each bonnet's vibration model (`src/pipeline/recipe_samples.rs`):\n\n\
          - part: {n} x {n} pixels of {d} mm, a power-law textured surface (one-sided 1-D PSD ~ \
-         f^-2, 30 nm RMS) down to half the pixel, the same part for both bonnets;\n\
+         f^-{ex}, {trms} nm RMS) down to half the pixel, the same part for both bonnets;\n\
          - tool: Gaussian spot, sigma {sig} mm, truncated at {dia} mm, {peak} nm/s peak; the \
          measured spot is that TIF dwelled {dwell} s, with 0.3 nm noise;\n\
          - path: raster along x, {p} mm pitch, feed {v0} to {v1} mm/s realising a dwell map \
@@ -275,6 +275,8 @@ fn recipe_readme() -> String {
         seed = RECIPE_SEED,
         n = rs::RECIPE_N,
         d = rs::RECIPE_PIXEL_MM,
+        ex = rs::RECIPE_TEXTURE_EXPONENT,
+        trms = rs::RECIPE_TEXTURE_RMS_NM,
         sig = rs::recipe_tif().sigma_mm,
         dia = rs::recipe_tif().diameter_mm,
         peak = rs::recipe_tif().peak_rate_nm_per_s,

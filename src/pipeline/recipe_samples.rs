@@ -13,10 +13,19 @@
 //! paper's 1.6 mm/s feed and 1000 rpm the spindle imprint, 10.4 /mm, is filtered out by the
 //! spot and nothing can be inferred): spindle 558 rpm, whose second harmonic (18.6 Hz) sits
 //! near the robot's resonance, and a 15 to 45 mm/s feed, so the imprint along the scan (0.21 to
-//! 0.62 /mm for the first harmonic) passes the 1.5 mm-sigma spot where the feed is fast; a 5 N normal-force fluctuation
-//! at the spindle harmonics and 0.5 N broadband, robot damping ratio 0.05, the same for both
+//! 0.62 /mm for the first harmonic) passes the 1.35 mm-sigma spot where the feed is fast; a 5 N
+//! normal-force fluctuation at the spindle harmonics and 0.5 N broadband, robot damping ratio 0.05, the same for both
 //! bonnets; the suppression bonnet adds its damping element (the vibration model's
 //! `Bonnet::Suppression`).
+//!
+//! What makes the vibration show in σ1 (the ripple at 1/pitch along Y of the after map): the
+//! part's own ripple in the σ1 band adds to the removal's in quadrature, so it must be small
+//! next to it (texture exponent 3: σ1 2.2 nm before polishing, against 5.9 nm at exponent 2), and the
+//! removal's ripple must be large enough for the vibration's change of it (the offset-driven
+//! change of spot width and rate, a few per cent) to be well above the noise: the 1.35 mm-sigma
+//! spot at the 3 mm pitch leaves about 4 nm, where the former 1.5 mm spot left 1.4 nm. With a
+//! 1.2 mm spot (and 1000 nm/s) the ripple is larger still but the calibration's rate scale of
+//! the suppression run came out 3.7 % low, a removal-rate difference as large as the vibration's.
 //!
 //! Heights in nm; pixel (i, j) at (j dx, i dy) mm.
 
@@ -57,14 +66,21 @@ pub const RECIPE_SPOT_DWELL_S: f64 = 0.2;
 pub const TRUTH_SAMPLE_HZ: f64 = 500.0;
 pub const TRUTH_VIBRATION_SEED: u64 = 11;
 
-/// The true TIF: a Gaussian of sigma 1.5 mm truncated at 12 mm, 700 nm/s peak.
+/// The true TIF: a Gaussian of sigma 1.35 mm truncated at 12 mm, 850 nm/s peak.
 pub fn recipe_tif() -> GaussianTif {
     GaussianTif {
-        sigma_mm: 1.5,
+        sigma_mm: 1.35,
         diameter_mm: 12.0,
-        peak_rate_nm_per_s: 700.0,
+        peak_rate_nm_per_s: 850.0,
     }
 }
+
+/// The part: a power-law texture, one-sided 1-D PSD ~ f^-exponent, of this RMS (nm). The
+/// exponent 3 keeps the part's own ripple in the σ1 band at 1/pitch small (σ1 2.2 nm measured
+/// before polishing, against 5.9 nm at exponent 2), so the removal's ripple, and the vibration's
+/// change of it, is what the measured σ1 shows.
+pub const RECIPE_TEXTURE_EXPONENT: f64 = 3.0;
+pub const RECIPE_TEXTURE_RMS_NM: f64 = 30.0;
 
 /// The vibration parameters both recipes state (and the truth uses).
 pub fn recipe_vibration() -> VibrationParams {
@@ -132,8 +148,8 @@ pub fn synth_config(spec: &RecipeRunSpec) -> SynthConfig {
         cols: RECIPE_N,
         pixel_mm: RECIPE_PIXEL_MM,
         surface: InitialSurface::PowerLaw {
-            exponent: 2.0,
-            rms_nm: 30.0,
+            exponent: RECIPE_TEXTURE_EXPONENT,
+            rms_nm: RECIPE_TEXTURE_RMS_NM,
         },
         truth_oversample: 2,
         tif: TrueTif::Gaussian(recipe_tif()),
@@ -213,14 +229,24 @@ impl Deposition for VibrationDeposition {
 
 /// Generates one bonnet's run.
 pub fn generate_run(spec: &RecipeRunSpec) -> Result<SynthRun, CalibrateError> {
+    generate_run_with(spec, &synth_config(spec), &recipe_vibration())
+}
+
+/// [`generate_run`] with another generator configuration and vibration truth (for studies of
+/// the sample setup).
+pub fn generate_run_with(
+    spec: &RecipeRunSpec,
+    cfg: &SynthConfig,
+    params: &VibrationParams,
+) -> Result<SynthRun, CalibrateError> {
     let mut dep = VibrationDeposition {
-        params: recipe_vibration(),
+        params: params.clone(),
         bonnet: spec.bonnet,
         sample_hz: TRUTH_SAMPLE_HZ,
         seed: TRUTH_VIBRATION_SEED,
         substeps: 2,
     };
-    let mut run = generate_with(&synth_config(spec), &mut dep)?;
+    let mut run = generate_with(cfg, &mut dep)?;
     // The run's own measurement noise (the generator's is shared by runs of one seed).
     let mut rng = bonnetlab_surface::rng::Rng::new(spec.noise_seed);
     for s in [&mut run.before, &mut run.after] {

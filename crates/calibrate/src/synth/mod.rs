@@ -321,6 +321,17 @@ fn wave(w: Waveform, phase: f64) -> f64 {
     }
 }
 
+/// `a` (a field periodic over its grid) on a grid `offset` pixels wider on every side:
+/// `rows x cols`, element (i, j) = `a[(i - offset) mod n0, (j - offset) mod n1]`.
+fn periodic_extend(a: &Array2<f64>, offset: usize, rows: usize, cols: usize) -> Array2<f64> {
+    let (n0, n1) = a.dim();
+    if offset == 0 && (rows, cols) == (n0, n1) {
+        return a.clone();
+    }
+    let wrap = |k: usize, n: usize| (k as isize - offset as isize).rem_euclid(n as isize) as usize;
+    Array2::from_shape_fn((rows, cols), |(i, j)| a[(wrap(i, n0), wrap(j, n1))])
+}
+
 /// Least-squares plane (piston, x slope, y slope) of the truth over the map grid.
 fn plane_fit(f: &TruthSurface, g: &Grid) -> (f64, f64, f64) {
     let (cx, cy) = (
@@ -642,22 +653,35 @@ pub fn generate_with(
     }
     let reach = rdx.hypot(rdy) + rth.abs() * cx.hypot(cy) + 2.0 * d;
 
-    // Truth grid: finer than the map, wider than the part.
+    // Truth grid: finer than the map, wider than the part. The part is drawn on a canonical
+    // grid whose margin does not depend on the injected registration (the margin of a run
+    // without one) and extended periodically to the margin the registration needs (the
+    // random fields are periodic over their FFT domain), so one seed gives one part whatever
+    // the registration. A registration reaching beyond the canonical margin (6 pixels + 2 mm)
+    // samples the periodic continuation there.
     let os = cfg.truth_oversample.max(1);
     let td = d / os as f64;
-    let margin_mm = reach + 4.0 * d + 2.0;
-    let m_px = (margin_mm / td).ceil() as usize;
-    let tg = Grid::new(
-        (cfg.rows - 1) * os + 1 + 2 * m_px,
-        (cfg.cols - 1) * os + 1 + 2 * m_px,
-        td,
-        td,
-        -(m_px as f64) * td,
-        -(m_px as f64) * td,
-    )
-    .map_err(perr)?;
+    let truth_grid = |m_px: usize| {
+        Grid::new(
+            (cfg.rows - 1) * os + 1 + 2 * m_px,
+            (cfg.cols - 1) * os + 1 + 2 * m_px,
+            td,
+            td,
+            -(m_px as f64) * td,
+            -(m_px as f64) * td,
+        )
+        .map_err(perr)
+    };
+    let margin_px = |reach: f64| ((reach + 4.0 * d + 2.0) / td).ceil() as usize;
+    // (2 d is the reach without a registration: the same arithmetic as `reach` above.)
+    let m0_px = margin_px(2.0 * d);
+    let m_px = margin_px(reach).max(m0_px);
+    let cg = truth_grid(m0_px)?;
+    let tg = truth_grid(m_px)?;
+    let extend = |a: &Array2<f64>| periodic_extend(a, m_px - m0_px, tg.rows, tg.cols);
+    let canonical = initial_surface(cfg, &cg, wx.max(wy))?;
     let truth = TruthSurface {
-        heights_nm: initial_surface(cfg, &tg, wx.max(wy))?,
+        heights_nm: extend(&canonical),
         grid: tg,
     };
     let plane = plane_fit(&truth, &grid);
@@ -665,7 +689,7 @@ pub fn generate_with(
     // Dwell map on a 1 mm grid over the raster: more dwell (slower) where the low-passed
     // surface is high.
     let over = ext * 0.8;
-    let fig = field::smooth(&truth.heights_nm, &tg, 5.0);
+    let fig = extend(&field::smooth(&canonical, &cg, 5.0));
     let fig_t = TruthSurface {
         heights_nm: fig,
         grid: tg,
@@ -716,7 +740,7 @@ pub fn generate_with(
     let height_z = cfg.effects.iter().find_map(|e| match e {
         Injected::HeightRate { smooth_mm, .. } => Some(standardised(
             TruthSurface {
-                heights_nm: field::smooth(&truth.heights_nm, &tg, *smooth_mm),
+                heights_nm: extend(&field::smooth(&canonical, &cg, *smooth_mm)),
                 grid: tg,
             },
             &grid,
@@ -726,7 +750,11 @@ pub fn generate_with(
     let rate_map = cfg.effects.iter().find_map(|e| match e {
         Injected::RateMap { correlation_mm, .. } => Some(standardised(
             TruthSurface {
-                heights_nm: field::smooth_random(&mut stream(cfg.seed, 6), &tg, *correlation_mm),
+                heights_nm: extend(&field::smooth_random(
+                    &mut stream(cfg.seed, 6),
+                    &cg,
+                    *correlation_mm,
+                )),
                 grid: tg,
             },
             &grid,
@@ -885,6 +913,58 @@ pub fn generate_with(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The part's texture does not depend on the margin an injected registration needs: one
+    /// seed, with and without a registration (and with a larger one), gives the same before map
+    /// bit for bit (before this, the truth grid's size, and so the power-law realisation,
+    /// followed the registration's reach).
+    #[test]
+    fn same_seed_same_part_whatever_the_registration() {
+        let base = SynthConfig {
+            rows: 40,
+            cols: 48,
+            pixel_mm: 0.5,
+            surface: InitialSurface::PowerLaw {
+                exponent: 2.0,
+                rms_nm: 20.0,
+            },
+            deposit_step_mm: 0.5,
+            feed_min_mm_per_s: 10.0,
+            feed_max_mm_per_s: 30.0,
+            ..SynthConfig::default()
+        };
+        let registered = |dx: f64, rot: f64| {
+            let mut c = base.clone();
+            c.effects.push(Injected::Registration {
+                dx_mm: dx,
+                dy_mm: -0.4 * dx,
+                rotation_deg: rot,
+            });
+            c
+        };
+        let plain = generate(&base).unwrap();
+        for cfg in [registered(0.3, 0.0), registered(2.5, 0.2)] {
+            let r = generate(&cfg).unwrap();
+            assert!(
+                r.before.heights_nm() == plain.before.heights_nm(),
+                "before maps differ with {:?}",
+                cfg.effects.last()
+            );
+            assert!(r.after.heights_nm() != plain.after.heights_nm());
+            // The same tool motion: the same path log.
+            assert!(r.path.x_mm == plain.path.x_mm && r.path.y_mm == plain.path.y_mm);
+        }
+    }
+
+    #[test]
+    fn periodic_extension_wraps_by_the_offset() {
+        let a = Array2::from_shape_fn((3, 4), |(i, j)| (10 * i + j) as f64);
+        let e = periodic_extend(&a, 1, 5, 6);
+        assert_eq!(e[(0, 0)], a[(2, 3)]);
+        assert_eq!(e[(1, 1)], a[(0, 0)]);
+        assert_eq!(e[(4, 5)], a[(0, 0)]);
+        assert_eq!(periodic_extend(&a, 0, 3, 4), a);
+    }
 
     #[test]
     fn triangle_wave_has_sine_phase_and_unit_amplitude() {
