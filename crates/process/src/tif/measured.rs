@@ -345,8 +345,9 @@ impl RateField for MeasuredTif {
 /// 0.6 mm sigma whose support is cut at 0.5 % of the peak, 3.3 sigma): a hard cut at 1.1 times
 /// the support plus one spot pixel moved the ripple sigma_1 at a 1.3 mm pitch by +1.2 % with the
 /// spot at 0.025 mm pixels and by +0.4 % at 0.06 mm (the cut radius moves with the pixel, and
-/// a step at 0.1 % of the peak is most of a ripple that small); the roll-off to the fitting
-/// window keeps every spot pixel within 0.2 %.
+/// a step at 0.1 % of the peak is most of a ripple that small). With the roll-off to the
+/// fitting window the worst case of the suite with the spot at a quarter pixel or finer is
+/// 0.31 % (before: 1.19 %); the bonnet spots (model-based rim) do not change.
 fn taper_weight(r: f64, start: f64, end: f64) -> f64 {
     if r <= start {
         1.0
