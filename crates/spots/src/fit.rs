@@ -261,7 +261,11 @@ fn lu_checked(a: &[f64], n: usize) -> Option<LU<f64, nalgebra::Dyn, nalgebra::Dy
         return None;
     }
     let lu = m.lu();
-    let tiny = lu.u().diagonal().iter().any(|p| !(p.abs() > 1e-14 * scale));
+    let tiny = lu
+        .u()
+        .diagonal()
+        .iter()
+        .any(|p| p.is_nan() || p.abs() <= 1e-14 * scale);
     (!tiny).then_some(lu)
 }
 
