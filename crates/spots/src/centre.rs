@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use bonnetlab_surface::Surface;
 
-use crate::linalg::least_squares;
+use bonnetlab_surface::lsq::{solve_from_r, StreamingQr};
 
 /// Pixels at or above this fraction of the smoothed peak enter the first paraboloid fit.
 pub const TOP_FRACTION: f64 = 0.85;
@@ -110,7 +110,20 @@ pub fn paraboloid_peak(
     if rows.len() < 12 {
         return None;
     }
-    let c = least_squares(rows.iter().map(|(r, y)| (&r[..], *y)), 6)?;
+    // Least squares by the project's QR (`bonnetlab_surface::lsq`, no normal equations); a
+    // degenerate set of pixels (a basis column dependent on the others) gives no vertex.
+    let mut qr = StreamingQr::new(7);
+    for (r, y) in &rows {
+        let mut row = [0.0; 7];
+        row[..6].copy_from_slice(r);
+        row[6] = *y;
+        qr.push_row(&row);
+    }
+    let sol = solve_from_r(&qr.finish(), 7);
+    if !sol.dropped.is_empty() || sol.coefficients.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let c = sol.coefficients;
     // Concave: the Hessian [[2c3, c4], [c4, 2c5]] is negative definite.
     let (a, b, d) = (2.0 * c[3], c[4], 2.0 * c[5]);
     if !(a < 0.0 && a * d - b * b > 0.0) {

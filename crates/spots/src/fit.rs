@@ -3,7 +3,7 @@
 //! Data per spot: peak rate, volumetric rate, FWHM X and FWHM Y. Residuals are logarithmic
 //! (ln(model / measured)), so every metric counts by its relative error whatever its unit.
 //! Parameters are fitted in log space (they stay positive) by Levenberg-Marquardt with a
-//! forward-difference Jacobian.
+//! forward-difference Jacobian; each damped step and the covariance are solved by nalgebra's LU.
 //!
 //! Identifiability: the bonnet radius `R` always shows in the spot width (a = sqrt(2Rh - h^2)).
 //! The Preston coefficient `k` and the effective modulus `E` enter the rate as
@@ -11,10 +11,10 @@
 //! varies across the spots; otherwise `E` is held at its starting value and only `k R`-type
 //! combinations are fitted (reported in `held`). The pressure exponent is never fitted.
 
+use nalgebra::{DMatrix, DVector, LU};
 use serde::{Deserialize, Serialize};
 
 use crate::error::SpotsError;
-use crate::linalg::solve;
 use crate::metrics::SpotMetrics;
 use crate::model::{BonnetModel, Factors, ModelMetrics};
 
@@ -148,7 +148,8 @@ pub fn fit_model(obs: &[Observation], start: &FitStart) -> Result<ModelFit, Spot
             for k in 0..np {
                 a[k * np + k] += lambda * jtj[k * np + k].max(1e-12);
             }
-            let Some(step) = solve(a, jtr.iter().map(|v| -v).collect(), np) else {
+            let rhs: Vec<f64> = jtr.iter().map(|v| -v).collect();
+            let Some(step) = solve(&a, &rhs, np) else {
                 lambda *= 10.0;
                 continue;
             };
@@ -251,15 +252,62 @@ fn normal(cols: &[Vec<f64>], r: &[f64], np: usize) -> (Vec<f64>, Vec<f64>) {
     (jtj, jtr)
 }
 
-fn invert(a: &[f64], n: usize) -> Option<Vec<f64>> {
-    let mut inv = vec![0.0; n * n];
-    for k in 0..n {
-        let mut e = vec![0.0; n];
-        e[k] = 1.0;
-        let col = solve(a.to_vec(), e, n)?;
-        for i in 0..n {
-            inv[i * n + k] = col[i];
-        }
+/// LU factors (nalgebra, partial pivoting) of the row-major n x n matrix `a`; `None` when a
+/// pivot is below 1e-14 of the matrix's largest entry (singular at its scale) or not finite.
+fn lu_checked(a: &[f64], n: usize) -> Option<LU<f64, nalgebra::Dyn, nalgebra::Dyn>> {
+    let m = DMatrix::from_row_slice(n, n, a);
+    let scale = m.amax();
+    if !(scale > 0.0 && scale.is_finite()) {
+        return None;
     }
-    Some(inv)
+    let lu = m.lu();
+    let tiny = lu
+        .u()
+        .diagonal()
+        .iter()
+        .any(|p| p.is_nan() || p.abs() <= 1e-14 * scale);
+    (!tiny).then_some(lu)
+}
+
+/// Solves `a x = b` (row-major n x n).
+fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
+    let x = lu_checked(a, n)?.solve(&DVector::from_column_slice(b))?;
+    x.iter()
+        .all(|v| v.is_finite())
+        .then(|| x.as_slice().to_vec())
+}
+
+/// The inverse of the row-major n x n matrix `a`, row-major.
+fn invert(a: &[f64], n: usize) -> Option<Vec<f64>> {
+    let inv = lu_checked(a, n)?.try_inverse()?;
+    inv.iter()
+        .all(|v| v.is_finite())
+        .then(|| inv.transpose().as_slice().to_vec())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn solves_a_permuted_system_inverts_and_rejects_singular() {
+        let a = [0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
+        let x = [1.5, -2.0, 0.25];
+        let b: Vec<f64> = (0..3)
+            .map(|r| (0..3).map(|c| a[r * 3 + c] * x[c]).sum())
+            .collect();
+        let got = solve(&a, &b, 3).unwrap();
+        for k in 0..3 {
+            assert!((got[k] - x[k]).abs() < 1e-12);
+        }
+        let inv = invert(&a, 3).unwrap();
+        for r in 0..3 {
+            for c in 0..3 {
+                let v: f64 = (0..3).map(|k| a[r * 3 + k] * inv[k * 3 + c]).sum();
+                assert!((v - f64::from(u8::from(r == c))).abs() < 1e-12);
+            }
+        }
+        assert!(solve(&[1.0, 2.0, 2.0, 4.0], &[1.0, 2.0], 2).is_none());
+        assert!(invert(&[1.0, 2.0, 2.0, 4.0 + 1e-16], 2).is_none());
+    }
 }

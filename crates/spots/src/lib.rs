@@ -13,7 +13,6 @@ pub mod error;
 pub mod export;
 pub mod fit;
 pub mod generate;
-mod linalg;
 pub mod manifest;
 pub mod metrics;
 pub mod model;
