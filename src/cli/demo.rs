@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 
 use super::compare::compare_with_progress;
 use super::CliError;
+use crate::pipeline::bonnets;
 use crate::pipeline::demo::{generate_samples as generate, sample_recipes, sample_runs};
 use crate::pipeline::msf_prediction::predicted_msf;
 use crate::pipeline::samples::{SAMPLE_PITCH_MM, SAMPLE_SEED};
@@ -127,13 +128,12 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         (Some(o), _) => o,
         (None, None) => &default_out,
         (None, Some(dir)) => {
-            println!(
+            return super::println_stdout(&format!(
                 "demo: wrote the sample maps (seed {}, {} repeats) to {}",
                 args.seed,
                 args.repeats,
                 dir.display()
-            );
-            return Ok(());
+            ));
         }
     };
     let generated = out.join("samples");
@@ -212,15 +212,14 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         .iter()
         .map(|r| format!("{} CR(RMS) {} %", r.name, fixed(100.0 * r.cr_rms, 1)))
         .collect();
-    println!(
+    super::println_stdout(&format!(
         "demo: wrote {} ({} runs, {n} maps from {}; {}) and {} ({b})",
         out.join("report.html").display(),
         c.runs.len(),
         samples.display(),
         crs.join(", "),
         out.join("bonnets").join("report.html").display(),
-    );
-    Ok(())
+    ))
 }
 
 /// The `compare` command the demo's bonnet comparison is (docs/cli.md, samples/README.md).
@@ -257,11 +256,11 @@ fn bonnet_comparison(samples: &Path, out: &Path) -> Result<String, CliError> {
     let (runs, settings) = super::compare::parse(&args)?;
     let recipes = super::compare::recipe_runs(&args)?;
     let c = compare_with_progress(&runs, &settings, false)?;
-    let opts = crate::pipeline::bonnets::Options {
+    let opts = bonnets::Options {
         remove: settings.remove.clone(),
         ..Default::default()
     };
-    let b = crate::pipeline::bonnets::compare_runs(&recipes, &opts).map_err(|e| CliError {
+    let b = bonnets::compare_runs(&recipes, &opts).map_err(|e| CliError {
         code: e.exit_code,
         message: e.message,
     })?;
