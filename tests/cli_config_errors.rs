@@ -28,6 +28,7 @@ fn run(dir: &Path, name: &str, text: &str, args: &[&str]) -> (Option<i32>, Strin
         match *a {
             "FILE" => cmd.arg(&p),
             "OUT" => cmd.arg(&out),
+            a if a.contains("FILE") => cmd.arg(a.replace("FILE", p.to_str().unwrap())),
             a => cmd.arg(a),
         };
     }
@@ -84,7 +85,12 @@ fn run_recipe_errors_name_file_key_and_nearest_name() {
             ),
             (
                 r("[path]", "[path"),
-                vec!["TOML", "syntax error", "line 7, column"],
+                vec![
+                    "TOML",
+                    "syntax error",
+                    "unclosed table, expected `]`",
+                    "line 7, column",
+                ],
             ),
         ],
     );
@@ -110,6 +116,15 @@ fn dwell_case_errors_name_file_key_and_nearest_name() {
             (
                 r("pixel_mm = 0.5", "pixel_mm = \"0.5\""),
                 vec!["pixel_mm", "expected a number"],
+            ),
+            (
+                r("\"gaussian\"", "\"gausian\""),
+                vec![
+                    "[tif] kind",
+                    "unknown TIF model \"gausian\"",
+                    "expected one of \"gaussian\"",
+                    "did you mean \"gaussian\"?",
+                ],
             ),
             (
                 r("rows = [10, 20]", "rows = [10, 20"),
@@ -175,4 +190,87 @@ fn vibration_table_errors_name_file_key_and_nearest_name() {
             ),
         ],
     );
+}
+
+/// Every command that reads a run recipe (`simulate`, `calibrate`, `compare --run`,
+/// `vibration`) rejects the same unknown table, unknown key and syntax error the same way:
+/// exit 2, one line naming the file, the key and the nearest valid name, or the parser's cause.
+#[test]
+fn every_recipe_reader_rejects_unknown_tables_and_keys() {
+    let r = |a: &str, b: &str| RECIPE.replace(a, b);
+    let readers: [&[&str]; 4] = [
+        &["simulate", "FILE", "--out", "OUT"],
+        &["calibrate", "FILE", "--out", "OUT"],
+        &[
+            "compare", "--run", "a=FILE", "--run", "b=FILE", "--out", "OUT",
+        ],
+        &["vibration", "FILE", "--json", "-"],
+    ];
+    for args in readers {
+        check(
+            args[0],
+            "run.toml",
+            args,
+            RECIPE,
+            vec![
+                (
+                    r("[process]", "[proces]"),
+                    vec!["[proces]", "unknown table", "did you mean [process]?"],
+                ),
+                (
+                    r("spindle_rpm", "spindel_rpm"),
+                    vec![
+                        "[process] spindel_rpm",
+                        "unknown key",
+                        "did you mean `spindle_rpm`?",
+                    ],
+                ),
+                (
+                    r("[path]", "[path"),
+                    vec!["TOML", "unclosed table, expected `]`", "line 7, column"],
+                ),
+            ],
+        );
+    }
+}
+
+/// A typo in a recipe's `[vibration]` table is an error in every command that reads the recipe,
+/// including `calibrate`, which does not model vibration (it was ignored there), and is named
+/// once (`compare` named the table twice). The run is the bundled sample's, so each command
+/// gets as far as the table.
+#[test]
+fn a_vibration_typo_in_a_run_recipe_is_an_error_everywhere() {
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/original");
+    let text = std::fs::read_to_string(sample.join("recipe.toml")).unwrap();
+    let mut good = text.clone();
+    for f in ["before.dat", "after.dat", "spot.dat", "path.csv"] {
+        let abs = format!("{:?}", sample.join(f).to_str().unwrap());
+        good = good.replace(&format!("\"{f}\""), &abs);
+    }
+    assert_ne!(good, text, "the sample recipe names its files");
+    assert!(good.contains("\nzeta1 = "), "the sample sets zeta1: {good}");
+    let typo = good.replace("\nzeta1 = ", "\nzeta_1 = ");
+    let readers: [&[&str]; 4] = [
+        &["simulate", "FILE", "--out", "OUT"],
+        &["calibrate", "FILE", "--out", "OUT"],
+        &[
+            "compare", "--run", "a=FILE", "--run", "b=FILE", "--out", "OUT",
+        ],
+        &["vibration", "FILE", "--json", "-"],
+    ];
+    for args in readers {
+        check(
+            args[0],
+            "run.toml",
+            args,
+            &good,
+            vec![(
+                typo.clone(),
+                vec![
+                    "run.toml: [vibration] zeta_1: unknown key",
+                    "did you mean `zeta1`?",
+                ],
+            )],
+        );
+    }
 }

@@ -21,8 +21,6 @@ pub mod vibration;
 
 pub use error::CliError;
 
-pub(crate) use crate::pipeline::error::vibration_error;
-
 /// bonnetlab: surface metrology, polishing simulation and vibration analysis for robot
 /// bonnet polishing.
 #[derive(Debug, Parser)]
@@ -83,15 +81,10 @@ pub fn run(cli: Cli) -> i32 {
     }
 }
 
-/// An error message as the user reads it: one line, without the libraries' "invalid
-/// argument: " tag after the file or flag it names (`--window: unknown window 'foo'`, not
-/// `--window: invalid argument: unknown window 'foo'`); the exit code already says bad input.
+/// An error message as the user reads it: one line (the libraries' messages carry no tag of
+/// their own; the exit code says bad input).
 pub fn plain_message(message: &str) -> String {
-    let one_line = message.replace(['\n', '\r'], " ");
-    let one_line = one_line
-        .strip_prefix("invalid argument: ")
-        .unwrap_or(&one_line);
-    one_line.replace(": invalid argument: ", ": ")
+    message.replace(['\n', '\r'], " ")
 }
 
 /// Writes bytes to stdout and flushes, checking every write: a failed write (`> /dev/full`) is

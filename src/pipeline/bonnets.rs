@@ -143,7 +143,7 @@ impl RunInput {
             p.inner_pressure_mpa,
             None,
         )
-        .map_err(|e| BonnetsError::input(recipe_file, format!("[vibration] {e}")))?;
+        .map_err(|e| BonnetsError::input(recipe_file, e))?;
         Ok(RunInput {
             name: name.to_string(),
             recipe_file: recipe_file.to_path_buf(),

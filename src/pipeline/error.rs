@@ -103,7 +103,7 @@ fn named(file: &Path, what: impl fmt::Display) -> String {
     if f.is_empty() || what.starts_with(&tag) {
         what
     } else if what.contains(&tag) {
-        // "invalid argument: FILE: ..." from a lower layer: keep one naming, at the start.
+        // "WHAT: FILE: ..." from a lower layer: keep one naming, at the start.
         format!("{f}: {}", what.replacen(&tag, "", 1))
     } else {
         format!("{f}: {what}")
@@ -133,8 +133,8 @@ mod tests {
 
     #[test]
     fn the_file_is_named_once() {
-        let e = Error::input("case.toml", "invalid argument: case.toml: bad key");
-        assert_eq!(e.message, "case.toml: invalid argument: bad key");
+        let e = Error::input("case.toml", "[tif] model: case.toml: bad key");
+        assert_eq!(e.message, "case.toml: [tif] model: bad key");
         let e = Error::processing("a.dat", "a.dat: no valid pixel");
         assert_eq!(e.message, "a.dat: no valid pixel");
         let e = Error::input("a.dat", "bad");

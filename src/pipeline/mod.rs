@@ -10,13 +10,18 @@ use bonnetlab_surface::Surface;
 pub mod bonnets;
 pub mod calibrate;
 pub mod compare;
+pub mod demo;
+pub mod dwell;
 pub mod error;
+pub mod msf_prediction;
 pub mod psd;
 pub mod recipe_samples;
 pub mod run_spec;
+pub mod samples;
 pub mod simulate;
 pub mod spots;
 pub mod stats;
+pub mod vibration;
 
 pub use error::Error;
 

@@ -393,9 +393,7 @@ fn nominal(
 ) -> Result<Prediction, Error> {
     let mode = if exact { Mode::Exact } else { Mode::Fast };
     predict(before, tool, path, None, mode).map_err(|e| match e {
-        ProcessError::InvalidArgument(what) if exact => {
-            Error::input(&recipe.path_log, what.replace("invalid argument: ", ""))
-        }
+        ProcessError::InvalidArgument(what) if exact => Error::input(&recipe.path_log, what),
         e => perr(&recipe.before, e),
     })
 }

@@ -27,14 +27,10 @@ pub struct StatsReport {
     pub dy_mm: Option<f64>,
     pub valid: usize,
     pub removed: Vec<Term>,
-    pub pv_nm: f64,
-    pub rms_nm: f64,
-    pub sa_nm: f64,
-    pub sp_nm: f64,
-    pub sv_nm: f64,
-    pub sz_nm: f64,
-    pub ssk: f64,
-    pub sku: f64,
+    /// `pv_nm`, `rms_nm`, `sa_nm`, `sp_nm`, `sv_nm`, `sz_nm`, `ssk`, `sku`: the height
+    /// parameters as the surface crate computes and names them.
+    #[serde(flatten)]
+    pub heights: HeightStats,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pvr_nm: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -97,14 +93,7 @@ pub fn stats_report_with_bands(
         dy_mm: s.dy_mm,
         valid: st.valid,
         removed: r.removed.clone(),
-        pv_nm: st.pv_nm,
-        rms_nm: st.rms_nm,
-        sa_nm: st.sa_nm,
-        sp_nm: st.sp_nm,
-        sv_nm: st.sv_nm,
-        sz_nm: st.sz_nm,
-        ssk: st.ssk,
-        sku: st.sku,
+        heights: st,
         pvr_nm: p.map(|p| p.pvr_nm),
         pvr_set: p.map(|_| PVR_SET),
         bands,

@@ -1,8 +1,39 @@
 //! The dwell trade-off curve for people (a plot) and pipelines (CSV columns): residual RMS (nm)
-//! against total dwell (min), the chosen point and the case's reference methods marked.
+//! against total dwell (min), the chosen point and the case's reference methods marked; and the
+//! one-line summary of `bonnetlab dwell`.
 
+use super::format::sig;
 use super::plot::{LinePlot, PlotError, Series, PALETTE};
+use crate::pipeline::dwell::DwellReport;
 use bonnetlab_process::dwell::TradeOffPoint;
+
+/// `dwell: wrote A and B: method M, total dwell T min, residual RMS R nm (PV P nm) in the clear
+/// aperture`: one line, numbers to their precision.
+pub fn summary(r: &DwellReport, wrote: &[String]) -> String {
+    format!(
+        "dwell: wrote {}: {}, total dwell {} min, residual RMS {} nm (PV {} nm) in the clear aperture{}",
+        wrote.join(" and "),
+        r.method,
+        sig(r.total_dwell_s / 60.0, 4),
+        sig(r.residual_rms_nm, 4),
+        sig(r.residual_pv_nm, 4),
+        if r.target_met { "" } else { "; target not met" },
+    )
+}
+
+/// The reference methods' (total dwell min, residual nm) points of a case's `[reference]`.
+pub fn reference_points(reference: Option<&serde_json::Value>) -> Vec<RefPoint> {
+    let Some(obj) = reference.and_then(|v| v.as_object()) else {
+        return Vec::new();
+    };
+    obj.iter()
+        .filter_map(|(name, v)| {
+            let min = v.get("total_dwell_min")?.as_f64()?;
+            let rms = v.get("residual_rms_nm")?.as_f64()?;
+            Some((name.clone(), min, rms))
+        })
+        .collect()
+}
 
 /// CSV header and columns of a trade-off curve: extra uniform removal (nm), total dwell (min),
 /// residual RMS (nm).

@@ -7,90 +7,11 @@
 //! crate defines it); the band edges are in cycles/mm with the upper edge clipped to Nyquist.
 
 use crate::report::format::fixed;
-use serde::Serialize;
 
-use bonnetlab_vibration::coupling::predict::{BonnetPrediction, MechanismResult};
+pub use crate::pipeline::msf_prediction::{PredictedMsf, PredictionRun, ASSUMPTIONS};
 
 use super::comparison::fmt_sig;
 use super::html::{Page, Table};
-
-/// The run the prediction was made for (what a reader needs to reproduce it).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct PredictionRun {
-    pub part_mm: (f64, f64),
-    pub rows: usize,
-    pub cols: usize,
-    pub dx_mm: f64,
-    pub dy_mm: f64,
-    /// TIF model, e.g. "paper bonnet (R 20 mm, Hertz pressure, four-step precession)".
-    pub tif: String,
-    pub tif_peak_rate_nm_per_s: f64,
-    pub pitch_mm: f64,
-    pub feed_mm_per_s: f64,
-    pub spindle_rpm: f64,
-    pub offset_mm: f64,
-    pub precession_deg: f64,
-    pub inner_pressure_mpa: f64,
-    pub sample_hz: f64,
-    pub seed: u64,
-}
-
-/// One bonnet's entry of `predicted_msf`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct PredictedMsf {
-    pub bonnet: String,
-    pub run: PredictionRun,
-    /// MSF band along Y, cycles/mm (upper edge clipped to Nyquist).
-    pub msf_band_per_mm: (f64, f64),
-    /// σ1 at 1/pitch along Y of the predicted and of the baseline removal, nm.
-    pub ripple_sigma1_nm: Option<f64>,
-    pub baseline_ripple_sigma1_nm: Option<f64>,
-    /// MSF band RMS (Y) of the predicted removal, of the baseline and of the induced part, nm.
-    pub removal_msf_band_rms_nm: f64,
-    pub baseline_msf_band_rms_nm: f64,
-    pub induced_msf_band_rms_nm: f64,
-    pub mechanisms: Vec<MechanismResult>,
-    pub assumptions: String,
-}
-
-/// The model's assumptions, stated once for the HTML and the JSON (values from the vibration
-/// crate's documented defaults, bonnetlab_vibration::params).
-pub const ASSUMPTIONS: &str = "The robot is modelled as two principal modes from the paper's \
-stiffness matrix (k1 = 1.476e3, k2 = 3.289e2 N/mm, theta = 13.2 deg) with equivalent masses from \
-the measured natural frequencies and the vibration crate's documented default modal damping, \
-driven by the contact force F_n (mu, 1) sin(wt) at the spindle frequency (default force and \
-friction coefficient), its harmonics, seeded broadband force noise and the ring-down after each \
-raster line reversal executed at the acceleration limit. The suppression bonnet adds damping \
-zeta_e = eta / 2 = 0.0575 in both principal directions and a series compliance (wave spring \
-50 N/mm, assumed) in front of the inflated bonnet's contact stiffness. Removal depends on the \
-offset non-linearly (spot radius and peak pressure grow with offset, Hertzian exponent 0.5); the \
-four mechanisms (normal offset, lateral spot jitter, slow envelope, acceleration-limited dwell \
-execution) are computed with the fast second-order expansion of the vibration crate, which is \
-validated against direct deposition of the instantaneous TIF. Shares are band powers over the \
-summed power of the mechanisms and their interaction, so they describe uncorrelated parts; the \
-prediction is for a uniform raster of the whole part (no dwell correction), not a fit to the \
-measured maps.";
-
-impl PredictedMsf {
-    pub fn new(run: PredictionRun, p: &BonnetPrediction) -> PredictedMsf {
-        let bonnet = match p.bonnet {
-            bonnetlab_vibration::params::Bonnet::Original => "original",
-            bonnetlab_vibration::params::Bonnet::Suppression => "suppression",
-        };
-        PredictedMsf {
-            bonnet: bonnet.to_string(),
-            run,
-            msf_band_per_mm: p.msf_band_per_mm,
-            ripple_sigma1_nm: p.ripple_sigma1_nm,
-            baseline_ripple_sigma1_nm: p.baseline_ripple_sigma1_nm,
-            removal_msf_band_rms_nm: p.removal_msf_band_rms_nm,
-            baseline_msf_band_rms_nm: p.baseline_msf_band_rms_nm,
-            induced_msf_band_rms_nm: p.induced_msf_band_rms_nm,
-            mechanisms: p.mechanisms.clone(),
-            assumptions: ASSUMPTIONS.to_string(),
-        }
-    }
-}
 
 fn opt_nm(v: Option<f64>) -> String {
     v.map(|x| fixed(x, 4)).unwrap_or_else(|| "\u{2014}".into())

@@ -32,13 +32,13 @@ pub fn table(r: &StatsReport) -> String {
     );
     t += &format!("valid     {} pixels\n", r.valid);
     t += &format!("removed   {removed}\n");
-    t += &format!("PV (Sz)   {:>12.4} nm\n", r.pv_nm);
-    t += &format!("RMS (Sq)  {:>12.4} nm\n", r.rms_nm);
-    t += &format!("Sa        {:>12.4} nm\n", r.sa_nm);
-    t += &format!("Sp        {:>12.4} nm\n", r.sp_nm);
-    t += &format!("Sv        {:>12.4} nm\n", r.sv_nm);
-    t += &format!("Ssk       {:>12.4}\n", r.ssk);
-    t += &format!("Sku       {:>12.4}   (not minus 3)\n", r.sku);
+    t += &format!("PV (Sz)   {:>12.4} nm\n", r.heights.pv_nm);
+    t += &format!("RMS (Sq)  {:>12.4} nm\n", r.heights.rms_nm);
+    t += &format!("Sa        {:>12.4} nm\n", r.heights.sa_nm);
+    t += &format!("Sp        {:>12.4} nm\n", r.heights.sp_nm);
+    t += &format!("Sv        {:>12.4} nm\n", r.heights.sv_nm);
+    t += &format!("Ssk       {:>12.4}\n", r.heights.ssk);
+    t += &format!("Sku       {:>12.4}   (not minus 3)\n", r.heights.sku);
     if let (Some(p), Some(set)) = (r.pvr_nm, r.pvr_set) {
         t += &format!("PVr       {p:>12.4} nm   ({set})\n");
     }

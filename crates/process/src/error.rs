@@ -9,7 +9,7 @@ use thiserror::Error;
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum ProcessError {
     /// An argument outside its domain (negative pitch, empty grid, ...).
-    #[error("invalid argument: {0}")]
+    #[error("{0}")]
     InvalidArgument(String),
     /// A file that cannot be read at all.
     #[error("{}: {}", file.display(), one_line(what))]

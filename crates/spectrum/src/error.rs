@@ -9,7 +9,7 @@ pub enum SpectrumError {
     #[error(transparent)]
     Surface(#[from] SurfaceError),
     /// An argument outside its domain (window parameter, band edges, pitch, ...).
-    #[error("invalid argument: {0}")]
+    #[error("{0}")]
     InvalidArgument(String),
     /// No line along the requested axis had a valid segment long enough to analyse.
     #[error("no usable {axis} line: every line has fewer than {min_len} consecutive valid pixels")]

@@ -18,7 +18,7 @@ pub enum SurfaceError {
     #[error("grid mismatch: {0}")]
     GridMismatch(String),
     /// An argument outside its domain (unknown term name, negative pixel size, ...).
-    #[error("invalid argument: {0}")]
+    #[error("{0}")]
     InvalidArgument(String),
     /// A least-squares system that is singular on the valid pixels.
     #[error("singular fit: {0}")]

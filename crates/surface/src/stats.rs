@@ -12,7 +12,11 @@ use crate::surface::Surface;
 /// Height parameters of a map (nm unless dimensionless).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct HeightStats {
+    /// Not serialized (nor `mean_nm`): a report states the count beside what was removed and
+    /// the parameters from `pv_nm` on (`stats --json`, flattening this struct).
+    #[serde(skip_serializing, default)]
     pub valid: usize,
+    #[serde(skip_serializing, default)]
     pub mean_nm: f64,
     pub pv_nm: f64,
     pub rms_nm: f64,

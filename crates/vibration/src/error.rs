@@ -15,7 +15,7 @@ pub enum VibrationError {
     #[error("[vibration] '{0}' and '{1}' cannot both be given")]
     Conflict(String, String),
     /// A bad argument to a library function (empty path, zero sampling rate, ...).
-    #[error("invalid argument: {0}")]
+    #[error("{0}")]
     InvalidArgument(String),
     /// A failure inside the process simulator the coupling builds on.
     #[error("process: {0}")]

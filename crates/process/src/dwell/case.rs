@@ -143,13 +143,8 @@ impl DwellCase {
             .as_ref()
             .ok_or_else(|| err("[tif]", "missing table".into()))?;
         match tif_t.kind.as_deref() {
-            Some("gaussian") => {}
-            other => {
-                return Err(err(
-                    "[tif] kind",
-                    format!("must be \"gaussian\", got {other:?}"),
-                ))
-            }
+            Some(k) if TIF_MODELS.contains(&k) => {}
+            other => return Err(err("[tif] kind", tif_model_error(other))),
         }
         let tif = GaussianTif::new(
             num(tif_t.sigma_mm, "[tif] sigma_mm")?,
@@ -215,7 +210,9 @@ impl DwellCase {
         let (rows, cols) = map.dim();
         if r0 < h0 || c0 < h1 || r1 + h0 > rows || c1 + h1 > cols {
             return Err(ProcessError::invalid(format!(
-                "{}: the clear aperture grown by the TIF radius ({h0} x {h1} px) leaves the {rows} x {cols} map",
+                "{}: [clear_aperture] rows [{r0}, {r1}), cols [{c0}, {c1}) grown by the TIF \
+                 half-width ({h0} rows, {h1} cols) reaches past the {rows} x {cols} map; keep \
+                 the clear aperture at least that far inside the map",
                 self.file.display()
             )));
         }
@@ -279,6 +276,32 @@ impl DwellCase {
 /// Largest fraction of the dwell grid's pixels that may be invalid in the map (filled from their
 /// neighbours and left out of the residual).
 const MAX_INVALID_FRACTION: f64 = 0.1;
+
+/// The TIF models a case may name in `[tif] kind`.
+const TIF_MODELS: [&str; 1] = ["gaussian"];
+
+/// The error of a `[tif] kind` that is missing or names no model: the models there are and,
+/// for a misspelt name, the nearest (`unknown TIF model "gausian"; expected one of
+/// "gaussian" (did you mean "gaussian"?)`).
+fn tif_model_error(kind: Option<&str>) -> String {
+    let expected: Vec<String> = TIF_MODELS.iter().map(|m| format!("{m:?}")).collect();
+    let expected = expected.join(", ");
+    let Some(kind) = kind else {
+        return format!("missing; expected one of {expected}");
+    };
+    let n = kind.chars().count();
+    let shown = if n > 64 {
+        let start: String = kind.chars().take(40).collect();
+        format!("{start:?}…({n} characters)")
+    } else {
+        format!("{kind:?}")
+    };
+    let hint = crate::config::nearest(kind, &TIF_MODELS)
+        .filter(|m| crate::config::edit_distance(&kind.to_lowercase(), m) <= 3)
+        .map(|m| format!(" (did you mean {m:?}?)"))
+        .unwrap_or_default();
+    format!("unknown TIF model {shown}; expected one of {expected}{hint}")
+}
 
 /// Largest clear-aperture row / column index (end exclusive) a case may name.
 const MAX_PIXELS: usize = 1_000_000;
@@ -376,6 +399,38 @@ mod tests {
         assert!(e.contains("pixle_mm") && e.contains("`pixel_mm`"), "{e}");
         let c = parse(&format!("{GOOD}[machine]\nv_max_mm_per_s = 20\n")).unwrap();
         assert_eq!(c.limits.v_max_mm_per_s, 20.0);
+    }
+
+    /// An unknown TIF model names the models there are and the nearest; a missing one says so.
+    #[test]
+    fn unknown_tif_model_names_the_models_and_the_nearest() {
+        let e = parse(&GOOD.replace("\"gaussian\"", "\"gausian\""))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "case.toml: [tif] kind: unknown TIF model \"gausian\"; expected one of \"gaussian\" \
+             (did you mean \"gaussian\"?)"
+        );
+        let e = parse(&GOOD.replace("\"gaussian\"", "\"zernike\""))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "case.toml: [tif] kind: unknown TIF model \"zernike\"; expected one of \"gaussian\""
+        );
+        let e = parse(&GOOD.replace("kind = \"gaussian\"\n", ""))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "case.toml: [tif] kind: missing; expected one of \"gaussian\""
+        );
+        let long = "x".repeat(1000);
+        let e = parse(&GOOD.replace("gaussian", &long))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("(1000 characters)") && e.len() < 200, "{e}");
     }
 
     /// Absurd finite numbers (issue #18) are errors naming the key, before anything is sized
