@@ -46,6 +46,9 @@ pub struct Fft2 {
     c2r: Arc<dyn ComplexToReal<f64>>,
     col_fwd: Arc<dyn Fft<f64>>,
     col_inv: Arc<dyn Fft<f64>>,
+    /// `exp(-2 pi i m / n1)`, m < n1: the row transform of a single column (see
+    /// [`Fft2::forward_columns`]).
+    row_twiddles: Vec<Complex<f64>>,
     /// Transforms run so far (forward and inverse), for work counts in solvers and benches.
     count: AtomicUsize,
 }
@@ -77,6 +80,12 @@ impl Fft2 {
             c2r: rp.plan_fft_inverse(n1),
             col_fwd: cp.plan_fft_forward(n0),
             col_inv: cp.plan_fft_inverse(n0),
+            row_twiddles: (0..n1)
+                .map(|m| {
+                    let a = -2.0 * std::f64::consts::PI * m as f64 / n1 as f64;
+                    Complex::new(a.cos(), a.sin())
+                })
+                .collect(),
             count: AtomicUsize::new(0),
         }
     }
@@ -158,6 +167,43 @@ impl Fft2 {
             rows(0, real, tmp);
             transpose(tmp, spec, n0, nh, false);
             cols(spec);
+        }
+    }
+
+    /// Forward transform (into `spec`, transposed half spectrum) of an input that is zero
+    /// except in columns `live` of its first `input.nrows()` rows (at most `n0`): one column
+    /// transform per live column and its row phase ramp, `S(k0, k1) = sum_j X_j(k0)
+    /// exp(-2 pi i k1 j / n1)`. Cheaper than [`Self::forward`] for a few live columns (a
+    /// raster's step-overs); equal to it up to rounding. `buf` is scratch.
+    pub fn forward_columns(
+        &self,
+        input: ArrayView2<f64>,
+        live: &[usize],
+        spec: &mut [Complex<f64>],
+        buf: &mut Vec<Complex<f64>>,
+    ) {
+        self.count.fetch_add(1, Ordering::Relaxed);
+        let (n0, n1, nh) = (self.n0, self.n1, self.nh);
+        let zero = Complex::new(0.0, 0.0);
+        spec.fill(zero);
+        let mut scratch = vec![zero; self.col_fwd.get_inplace_scratch_len()];
+        for &j in live {
+            buf.clear();
+            buf.extend(
+                input
+                    .column(j)
+                    .iter()
+                    .take(n0)
+                    .map(|&v| Complex::new(v, 0.0)),
+            );
+            buf.resize(n0, zero);
+            self.col_fwd.process_with_scratch(buf, &mut scratch);
+            for (k1, dst) in spec.chunks_mut(n0).take(nh).enumerate() {
+                let t = self.row_twiddles[(k1 * j) % n1];
+                for (d, x) in dst.iter_mut().zip(buf.iter()) {
+                    *d += x * t;
+                }
+            }
         }
     }
 
@@ -411,6 +457,9 @@ pub struct MultiConvolver {
     acc: Vec<Complex<f64>>,
     /// Rows of the current input that are not all zero.
     live: Vec<bool>,
+    /// Columns of the current input that are not all zero (when few), and a column buffer.
+    live_cols: Vec<usize>,
+    colbuf: Vec<Complex<f64>>,
 }
 
 impl std::fmt::Debug for MultiConvolver {
@@ -449,6 +498,8 @@ impl MultiConvolver {
             spec: vec![zero; len],
             acc: vec![zero; len],
             live: Vec::new(),
+            live_cols: Vec::new(),
+            colbuf: Vec::new(),
         }
     }
 
@@ -486,20 +537,29 @@ impl MultiConvolver {
         let mut any = false;
         for (input, kh) in inputs.iter().zip(&self.kernel_hats) {
             let Some(input) = input else { continue };
-            load_live_rows(
-                &mut self.real,
-                n1,
-                *input,
-                self.rows,
-                self.cols,
-                &mut self.live,
-            );
-            self.fft.forward_live(
-                &mut self.real,
-                &mut self.tmp,
-                &mut self.spec,
-                Some(&self.live),
-            );
+            let view = input.slice(ndarray::s![
+                ..self.rows.min(input.nrows()),
+                ..self.cols.min(input.ncols())
+            ]);
+            if let Some(cols) = live_columns(view, MAX_SPARSE_COLUMNS, &mut self.live_cols) {
+                self.fft
+                    .forward_columns(view, cols, &mut self.spec, &mut self.colbuf);
+            } else {
+                load_live_rows(
+                    &mut self.real,
+                    n1,
+                    *input,
+                    self.rows,
+                    self.cols,
+                    &mut self.live,
+                );
+                self.fft.forward_live(
+                    &mut self.real,
+                    &mut self.tmp,
+                    &mut self.spec,
+                    Some(&self.live),
+                );
+            }
             let first = !any;
             let mac = |((a, s), k): ((&mut Complex<f64>, &Complex<f64>), &Complex<f64>)| {
                 *a = if first { s * k } else { *a + s * k };
@@ -572,6 +632,35 @@ fn load_padded(real: &mut [f64], n1: usize, input: ArrayView2<f64>, rows: usize,
 /// Copies the rows of the top-left `rows x cols` of `input` that are not all zero into a
 /// row-major buffer of row length `n1` (zero-padded to it), and marks them in `live` (one flag
 /// per buffer row; the other rows of the buffer are left as they were and must not be read).
+/// Most live columns for which [`MultiConvolver::apply_sum`] transforms an input column by
+/// column ([`Fft2::forward_columns`]: per column about an eighth of a full transform's work).
+const MAX_SPARSE_COLUMNS: usize = 4;
+
+/// The indices of the columns of `input` that are not all zero, in `out`, when there are at
+/// most `max` of them (else `None`).
+fn live_columns<'a>(
+    input: ArrayView2<f64>,
+    max: usize,
+    out: &'a mut Vec<usize>,
+) -> Option<&'a [usize]> {
+    let mut on = vec![false; input.ncols()];
+    let mut n = 0;
+    for row in input.rows() {
+        for (j, v) in row.iter().enumerate() {
+            if *v != 0.0 && !on[j] {
+                on[j] = true;
+                n += 1;
+                if n > max {
+                    return None;
+                }
+            }
+        }
+    }
+    out.clear();
+    out.extend(on.iter().enumerate().filter(|(_, o)| **o).map(|(j, _)| j));
+    Some(out)
+}
+
 fn load_live_rows(
     real: &mut [f64],
     n1: usize,
@@ -645,6 +734,43 @@ mod tests {
         let before = m.fft().transforms();
         let _ = m.apply_sum(&[None, Some(y.view())]);
         assert_eq!(m.fft().transforms() - before, 2);
+    }
+
+    #[test]
+    fn sparse_columns_are_transformed_column_by_column() {
+        // Step-over maps: dwell in two columns only (one of them the last), next to a dense
+        // map; the sum equals the direct convolution, and the sparse transform the full one.
+        let (r, c) = (21, 26);
+        let mut x = Array2::zeros((r, c));
+        let z = random(r, c, 20);
+        for j in [3, c - 1] {
+            x.column_mut(j).assign(&z.column(j));
+        }
+        let y = random(r, c, 21);
+        let (k, l) = (random(5, 7, 22), random(3, 5, 23));
+        let mut m = MultiConvolver::with_fft_size(r, c, &[k.view(), l.view()], r + 9, c + 10);
+        let got = m.apply_sum(&[Some(x.view()), Some(y.view())]);
+        let want = convolve_direct(x.view(), k.view()) + convolve_direct(y.view(), l.view());
+        let peak = want.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let err = (&got - &want).iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        assert!(err < 1e-12 * peak, "{err} vs {peak}");
+        let fft = Fft2::new(r + 9, c + 10);
+        let (n0, n1) = fft.shape();
+        let mut real = vec![0.0; n0 * n1];
+        load_padded(&mut real, n1, x.view(), r, c);
+        let mut tmp = vec![Complex::new(0.0, 0.0); fft.spectrum_len()];
+        let mut full = tmp.clone();
+        fft.forward(&mut real, &mut tmp, &mut full);
+        let mut sparse = tmp.clone();
+        fft.forward_columns(x.view(), &[3, c - 1], &mut sparse, &mut Vec::new());
+        let d = full
+            .iter()
+            .zip(&sparse)
+            .fold(0.0f64, |a, (p, q)| a.max((p - q).norm()));
+        assert!(
+            d < 1e-12 * full.iter().fold(0.0f64, |a, p| a.max(p.norm())),
+            "{d}"
+        );
     }
 
     #[test]

@@ -335,17 +335,31 @@ fn line_phases(steps: &[SubStep], kind: usize) -> Option<LinePhases> {
         }
         let (w, wp) = (start..b).fold((0.0, 0.0), |(x, y), k| (x + w_sum[k], y + wp_sum[k]));
         bin_cluster[start..b].fill(phase.len() as u8);
-        phase.push(wp / w);
+        let f = wp / w;
+        // A minor motion's lines (a raster's step-overs) take their kernel at the nearest
+        // 1 / MINOR_PHASE_STEPS pixel, so a path moved by a little reuses its kernels.
+        phase.push(if total < MINOR_MOTION_SHARE * all {
+            (f * MINOR_PHASE_STEPS).round() / MINOR_PHASE_STEPS
+        } else {
+            f
+        });
     }
     Some(LinePhases { bin_cluster, phase })
 }
 
 /// Share of a sub-step's dwell in one motion below which it is a side-effect of motion along
-/// the other axis (a logged line's jitter, a step between lines): it has no line structure, so
-/// it is splatted cubically onto that motion's centred kernel (one map, no phase kernels). Its
-/// error there (at most ~2 % of the share's line profile at a steep footprint edge) is below
-/// 2e-4 of the sub-step's removal.
+/// the other axis (a logged line's jitter, a step between lines): it has no line structure of
+/// its own, so it goes with the major motion (that motion's kernel and line phase; no map of
+/// its own). The two one-pixel box kernels differ by about 1 % of the footprint, so the error
+/// is below 1e-4 of the sub-step's removal.
 const MINOR_SHARE: f64 = 1e-2;
+/// Share of the path's dwell below which a motion is minor (a raster's step-overs, about 1 %):
+/// its line phases are rounded to 1 / [`MINOR_PHASE_STEPS`] pixel. The dwell is then placed up
+/// to 1/128 pixel off (a relative error below 1e-3 of that motion's removal, so below 5e-5 of
+/// the path's), and a path moved by a little (a lag, an offset being refined) reuses the
+/// kernels instead of building new ones.
+const MINOR_MOTION_SHARE: f64 = 5e-2;
+const MINOR_PHASE_STEPS: f64 = 64.0;
 /// Least share of a motion's dwell in one sub-row phase bin for the bin to belong to a line.
 const LINE_BIN_SHARE: f64 = 1e-2;
 /// Most share of the path's dwell in phase bins outside the lines (splatted cubically onto the
@@ -612,7 +626,16 @@ impl FastRemoval {
         // The path is walked once; its sub-steps are kept for the line phases and the splat.
         let mut steps = std::mem::take(&mut self.steps);
         steps.clear();
-        for_each_motion_substep(path, weights, &self.ext, |u, v, w, dt, shares| {
+        for_each_motion_substep(path, weights, &self.ext, |u, v, w, dt, mut shares| {
+            // A motion's minor share (a logged line's jitter across it, a step-over's drift
+            // along the lines) goes with the major motion: its kernel and line phase.
+            if shares[1] > 0.0 && shares[2] > 0.0 {
+                if shares[1] < MINOR_SHARE {
+                    shares = [0.0, 0.0, 1.0];
+                } else if shares[2] < MINOR_SHARE {
+                    shares = [0.0, 1.0, 0.0];
+                }
+            }
             steps.push(SubStep {
                 u,
                 v,
