@@ -20,6 +20,7 @@
 use std::sync::Arc;
 
 use crate::effects::{Candidate, Current};
+use crate::grid::sample;
 use crate::model::{Channel, Effect, Linear, Param, Problem};
 use crate::selection::{base_gram, holdout, split, Score};
 
@@ -32,6 +33,8 @@ pub const FALLBACK_FRACTION: f64 = 0.01;
 pub const WINDOWS: usize = 12;
 /// Largest number of knots per axis of `rate_map`.
 pub const MAP_KNOTS: usize = 6;
+/// Least dwell over the measured part of a unit, relative to the median unit's.
+const MIN_SUPPORT: f64 = 0.25;
 /// Fewest raster lines for the line and direction kinds.
 const MIN_LINES: usize = 4;
 /// |travel direction component| above which a sample runs along the raster axis.
@@ -202,7 +205,53 @@ pub struct Shape {
 
 impl Shape {
     /// Units' indicator or hat weights; column j+1 of unit j+1 (unit 0 is the reference).
+    ///
+    /// Units with little dwell over the measured part (less than `MIN_SUPPORT` of the median
+    /// unit's: a line or knot beyond a round aperture) cannot be told apart and are merged
+    /// into the nearest unit that has enough.
     fn units(basis: Basis, units: Vec<Vec<f64>>, at: Vec<(f64, f64)>, p: &Problem) -> Shape {
+        let on = p.before_valid.mapv(|v| if v { 1.0 } else { 0.0 });
+        let inside: Vec<f64> = (0..p.samples.len())
+            .map(|k| {
+                let v = sample(&p.grid, &on, p.samples.x_mm[k], p.samples.y_mm[k]);
+                if v >= 0.5 {
+                    p.samples.dt_s[k]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let support: Vec<f64> = units
+            .iter()
+            .map(|g| g.iter().zip(&inside).map(|(a, b)| a * b).sum())
+            .collect();
+        let mut sorted = support.clone();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        let med = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+        let keep: Vec<usize> = (0..units.len())
+            .filter(|&j| support[j] >= MIN_SUPPORT * med && support[j] > 0.0)
+            .collect();
+        let (units, at) = if keep.is_empty() || keep.len() == units.len() {
+            (units, at)
+        } else {
+            let mut merged: Vec<Vec<f64>> = keep.iter().map(|&j| units[j].clone()).collect();
+            for (j, g) in units.iter().enumerate() {
+                if keep.contains(&j) {
+                    continue;
+                }
+                let d = |i: usize| {
+                    let (a, b) = (at[keep[i]], at[j]);
+                    (a.0 - b.0).hypot(a.1 - b.1)
+                };
+                let best = (0..keep.len())
+                    .min_by(|&a, &b| d(a).total_cmp(&d(b)))
+                    .unwrap_or(0);
+                for (m, v) in merged[best].iter_mut().zip(g) {
+                    *m += v;
+                }
+            }
+            (merged, keep.iter().map(|&j| at[j]).collect())
+        };
         let dwell = units
             .iter()
             .map(|g| g.iter().zip(&p.samples.dt_s).map(|(a, b)| a * b).sum())
