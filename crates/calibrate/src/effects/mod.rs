@@ -9,8 +9,12 @@
 //!   `-(dK/dx) * D_{e_x} - (dK/dy) * D_{e_y}` per unit displacement;
 //! - TIF width: column `(dK/ds) * D`;
 //! - registration: column `grad(after) . dT/dtheta` (see `registration`).
+//!
+//! `fallback` adds kinds no library entry names (rate per direction, per raster line, per time
+//! window, a smooth rate map), built on the run's own structure and offered last.
 
 pub mod direction_lag;
+pub mod fallback;
 pub mod path_offset;
 pub mod periodic_path_error;
 pub mod rate_covariate;
@@ -180,6 +184,8 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     v.extend(rate_oscillation::candidates(cur));
     v.extend(rate_step::candidates(cur));
     v.extend(rate_profile::candidates(cur));
+    // Last: kinds no library entry names, offered only past a stricter held-out bar.
+    v.extend(fallback::candidates(cur));
     v
 }
 

@@ -1,0 +1,718 @@
+//! Fallback kinds for effects the library does not name, built on the run's own structure
+//! (issue #15): the removal rate per travel direction along the raster (`rate_per_direction`),
+//! per raster line (`rate_per_line`), per time window (`rate_per_window`) and as a smooth map
+//! over the part (`rate_map`). Each is a set of rate-weight bases `g_j` over the commanded
+//! path's samples, exactly linear through the forward model (columns `K * D_{g_j}`, the same
+//! as every rate effect; see `model`), so fitting one is a linear least-squares problem.
+//!
+//! What each localises is in its reported parameters: the rate of every line (with the lines
+//! that deviate), of every time window (with the windows that deviate), of every knot of the
+//! map (with where it is highest and lowest), or the two travel directions' rates; the
+//! `summary` parameter says it in words.
+//!
+//! Regularisation: a fallback has up to ~50 parameters, so it is offered to the selection only
+//! when its own held-out score (the selection's two-fold checkerboard test, `selection`) clears
+//! a stricter bar than the named kinds': `z >= FALLBACK_Z` and a held-out reduction of at least
+//! `FALLBACK_FRACTION * sqrt(parameters)` of the held-out sum of squares. It then competes in
+//! the same round as the named kinds, where fewer parameters win near-ties and unknown kinds
+//! sort last, so a named kind that explains the residual as well is preferred.
+
+use std::sync::Arc;
+
+use crate::effects::{Candidate, Current};
+use crate::grid::sample;
+use crate::model::{Channel, Effect, Linear, Param, Problem};
+use crate::selection::{base_gram, holdout, split, Score};
+
+/// Held-out z a fallback must reach before it is offered.
+pub const FALLBACK_Z: f64 = 5.0;
+/// Held-out reduction (fraction of the held-out sum of squares) per square root of the number
+/// of parameters that a fallback must reach before it is offered.
+pub const FALLBACK_FRACTION: f64 = 0.01;
+/// Time windows of `rate_per_window`.
+pub const WINDOWS: usize = 12;
+/// Largest number of knots per axis of `rate_map`.
+pub const MAP_KNOTS: usize = 6;
+/// Least dwell over the measured part of a unit, relative to the median unit's.
+const MIN_SUPPORT: f64 = 0.25;
+/// Fewest raster lines for the line and direction kinds.
+const MIN_LINES: usize = 4;
+/// |travel direction component| above which a sample runs along the raster axis.
+const ON_LINE: f64 = 0.7;
+
+/// The fallback bases.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Basis {
+    Direction,
+    Line,
+    Window,
+    Map,
+}
+
+impl Basis {
+    pub const ALL: [Basis; 4] = [Basis::Direction, Basis::Line, Basis::Window, Basis::Map];
+
+    pub fn kind(self) -> &'static str {
+        match self {
+            Basis::Direction => "rate_per_direction",
+            Basis::Line => "rate_per_line",
+            Basis::Window => "rate_per_window",
+            Basis::Map => "rate_map",
+        }
+    }
+}
+
+/// The raster structure of the commanded path.
+#[derive(Debug, Clone)]
+pub struct Raster {
+    /// Lines run along x (else along y).
+    pub axis_x: bool,
+    /// Cross coordinate of each line (mm), ascending.
+    pub line_mm: Vec<f64>,
+    /// Per sample: index of the nearest line by its cross coordinate.
+    pub line_of: Vec<usize>,
+    /// Per sample: +1 / -1 when travelling along the raster axis in + / -, else 0.
+    pub dir: Vec<f64>,
+}
+
+impl Raster {
+    /// The raster of `p`'s path: the axis most of the dwell travels along, the lines as runs of
+    /// samples along it (merged when their cross coordinates are within a pixel). `None` when
+    /// fewer than `MIN_LINES` lines or less than half the dwell is on lines (not a raster).
+    pub fn of(p: &Problem) -> Option<Raster> {
+        let s = &p.samples;
+        let n = s.len();
+        let total: f64 = s.dt_s.iter().sum();
+        let share = |u: &[f64]| -> f64 {
+            u.iter()
+                .zip(&s.dt_s)
+                .filter(|(v, _)| v.abs() > ON_LINE)
+                .map(|(_, d)| d)
+                .sum::<f64>()
+        };
+        let (sx, sy) = (share(&s.ux), share(&s.uy));
+        let axis_x = sx >= sy;
+        if sx.max(sy) < 0.5 * total || total <= 0.0 {
+            return None;
+        }
+        let (u, cross, along) = if axis_x {
+            (&s.ux, &s.y_mm, &s.x_mm)
+        } else {
+            (&s.uy, &s.x_mm, &s.y_mm)
+        };
+        let dir: Vec<f64> = u
+            .iter()
+            .map(|v| if v.abs() > ON_LINE { v.signum() } else { 0.0 })
+            .collect();
+        // Runs of samples along the axis in one direction: (dwell-weighted cross, length).
+        let mut segs: Vec<(f64, f64)> = Vec::new();
+        let mut k = 0;
+        while k < n {
+            if dir[k] == 0.0 {
+                k += 1;
+                continue;
+            }
+            let (mut c, mut w, start) = (0.0, 0.0, k);
+            while k < n && dir[k] == dir[start] {
+                c += cross[k] * s.dt_s[k];
+                w += s.dt_s[k];
+                k += 1;
+            }
+            let len = (along[k - 1] - along[start]).abs();
+            if w > 0.0 {
+                segs.push((c / w, len));
+            }
+        }
+        let mut lens: Vec<f64> = segs.iter().map(|v| v.1).collect();
+        lens.sort_by(|a, b| a.total_cmp(b));
+        let med = lens.get(lens.len() / 2).copied().unwrap_or(0.0);
+        let pix = p.grid.dx_mm.max(p.grid.dy_mm);
+        let mut pos: Vec<f64> = segs
+            .iter()
+            .filter(|(_, l)| *l >= 0.2 * med && *l >= 4.0 * pix)
+            .map(|v| v.0)
+            .collect();
+        pos.sort_by(|a, b| a.total_cmp(b));
+        let mut lines: Vec<(f64, f64)> = Vec::new(); // (sum, count)
+        for c in pos {
+            match lines.last_mut() {
+                Some((sum, cnt)) if c - *sum / *cnt <= pix => {
+                    *sum += c;
+                    *cnt += 1.0;
+                }
+                _ => lines.push((c, 1.0)),
+            }
+        }
+        let line_mm: Vec<f64> = lines.iter().map(|(s, c)| s / c).collect();
+        if line_mm.len() < MIN_LINES {
+            return None;
+        }
+        let line_of = cross.iter().map(|&c| nearest(&line_mm, c)).collect();
+        Some(Raster {
+            axis_x,
+            line_mm,
+            line_of,
+            dir,
+        })
+    }
+
+    fn axis(&self) -> &'static str {
+        if self.axis_x {
+            "x"
+        } else {
+            "y"
+        }
+    }
+
+    fn cross(&self) -> &'static str {
+        if self.axis_x {
+            "y"
+        } else {
+            "x"
+        }
+    }
+}
+
+/// Index of the value of ascending `v` nearest to `c`.
+fn nearest(v: &[f64], c: f64) -> usize {
+    let i = v.partition_point(|&a| a < c);
+    if i == 0 {
+        0
+    } else if i >= v.len() {
+        v.len() - 1
+    } else if c - v[i - 1] <= v[i] - c {
+        i - 1
+    } else {
+        i
+    }
+}
+
+/// A fallback's bases over the samples and what each unit (line, window, knot) is.
+#[derive(Debug)]
+pub struct Shape {
+    pub basis: Basis,
+    /// Rate weights per column (the first unit is the reference and has no column, except for
+    /// `Direction`, whose one column is the travel sign).
+    pub cols: Vec<(String, Vec<f64>)>,
+    /// Dwell (s) of each unit (weights summed over samples), unit 0 the reference.
+    pub dwell: Vec<f64>,
+    /// Per unit: its position (line cross coordinate, window start s, knot (x, y)).
+    pub at: Vec<(f64, f64)>,
+    /// Window length (s) or map knot spacing (mm, x and y).
+    pub step: (f64, f64),
+    pub raster: Option<Arc<Raster>>,
+}
+
+impl Shape {
+    /// Units' indicator or hat weights; column j+1 of unit j+1 (unit 0 is the reference).
+    ///
+    /// Units with little dwell over the measured part (less than `MIN_SUPPORT` of the median
+    /// unit's: a line or knot beyond a round aperture) cannot be told apart and are merged
+    /// into the nearest unit that has enough.
+    fn units(basis: Basis, units: Vec<Vec<f64>>, at: Vec<(f64, f64)>, p: &Problem) -> Shape {
+        let on = p.before_valid.mapv(|v| if v { 1.0 } else { 0.0 });
+        let inside: Vec<f64> = (0..p.samples.len())
+            .map(|k| {
+                let v = sample(&p.grid, &on, p.samples.x_mm[k], p.samples.y_mm[k]);
+                if v >= 0.5 {
+                    p.samples.dt_s[k]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let support: Vec<f64> = units
+            .iter()
+            .map(|g| g.iter().zip(&inside).map(|(a, b)| a * b).sum())
+            .collect();
+        let mut sorted = support.clone();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        let med = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+        let keep: Vec<usize> = (0..units.len())
+            .filter(|&j| support[j] >= MIN_SUPPORT * med && support[j] > 0.0)
+            .collect();
+        let (units, at) = if keep.is_empty() || keep.len() == units.len() {
+            (units, at)
+        } else {
+            let mut merged: Vec<Vec<f64>> = keep.iter().map(|&j| units[j].clone()).collect();
+            for (j, g) in units.iter().enumerate() {
+                if keep.contains(&j) {
+                    continue;
+                }
+                let d = |i: usize| {
+                    let (a, b) = (at[keep[i]], at[j]);
+                    (a.0 - b.0).hypot(a.1 - b.1)
+                };
+                let best = (0..keep.len())
+                    .min_by(|&a, &b| d(a).total_cmp(&d(b)))
+                    .unwrap_or(0);
+                for (m, v) in merged[best].iter_mut().zip(g) {
+                    *m += v;
+                }
+            }
+            (merged, keep.iter().map(|&j| at[j]).collect())
+        };
+        let dwell = units
+            .iter()
+            .map(|g| g.iter().zip(&p.samples.dt_s).map(|(a, b)| a * b).sum())
+            .collect();
+        let cols = units
+            .into_iter()
+            .enumerate()
+            .skip(1)
+            .map(|(j, g)| (format!("rate:{}:{j}", basis.kind()), g))
+            .collect();
+        Shape {
+            basis,
+            cols,
+            dwell,
+            at,
+            step: (0.0, 0.0),
+            raster: None,
+        }
+    }
+
+    pub fn of(basis: Basis, p: &Problem, raster: Option<&Arc<Raster>>) -> Option<Shape> {
+        let s = &p.samples;
+        let n = s.len();
+        match basis {
+            Basis::Direction => {
+                let r = raster?;
+                let plus: f64 = (0..n).filter(|&k| r.dir[k] > 0.0).map(|k| s.dt_s[k]).sum();
+                let minus: f64 = (0..n).filter(|&k| r.dir[k] < 0.0).map(|k| s.dt_s[k]).sum();
+                if plus <= 0.0 || minus <= 0.0 {
+                    return None;
+                }
+                Some(Shape {
+                    basis,
+                    cols: vec![("rate:rate_per_direction".into(), r.dir.clone())],
+                    dwell: vec![plus, minus],
+                    at: Vec::new(),
+                    step: (0.0, 0.0),
+                    raster: Some(r.clone()),
+                })
+            }
+            Basis::Line => {
+                let r = raster?;
+                let units: Vec<Vec<f64>> = (0..r.line_mm.len())
+                    .map(|l| {
+                        r.line_of
+                            .iter()
+                            .map(|&m| if m == l { 1.0 } else { 0.0 })
+                            .collect()
+                    })
+                    .collect();
+                let at = r.line_mm.iter().map(|&c| (c, 0.0)).collect();
+                let mut sh = Shape::units(basis, units, at, p);
+                sh.raster = Some(r.clone());
+                Some(sh)
+            }
+            Basis::Window => {
+                let dur = (s.t1_s - s.t0_s).max(f64::MIN_POSITIVE);
+                let units = (0..WINDOWS)
+                    .map(|w| {
+                        (0..n)
+                            .map(|k| {
+                                let i = ((s.tau(k) * WINDOWS as f64) as usize).min(WINDOWS - 1);
+                                if i == w {
+                                    1.0
+                                } else {
+                                    0.0
+                                }
+                            })
+                            .collect()
+                    })
+                    .collect();
+                let len = dur / WINDOWS as f64;
+                let at = (0..WINDOWS).map(|w| (w as f64 * len, 0.0)).collect();
+                let mut sh = Shape::units(basis, units, at, p);
+                sh.step = (len, 0.0);
+                Some(sh)
+            }
+            Basis::Map => {
+                let range = |v: &[f64]| {
+                    v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, &x| {
+                        (a.0.min(x), a.1.max(x))
+                    })
+                };
+                let (x0, x1) = range(&s.x_mm);
+                let (y0, y1) = range(&s.y_mm);
+                // Knots no closer than two spot radii (finer is not a smooth map).
+                let knots = |ext: f64| -> usize {
+                    ((ext / (2.0 * p.tif_radius_mm)).floor() as usize + 1).clamp(2, MAP_KNOTS)
+                };
+                let (nx, ny) = (knots(x1 - x0), knots(y1 - y0));
+                if x1 - x0 <= 0.0 || y1 - y0 <= 0.0 || nx * ny < 4 {
+                    return None;
+                }
+                let (hx, hy) = ((x1 - x0) / (nx - 1) as f64, (y1 - y0) / (ny - 1) as f64);
+                let hat = |v: f64, c: f64, h: f64| (1.0 - ((v - c) / h).abs()).max(0.0);
+                let mut units = Vec::with_capacity(nx * ny);
+                let mut at = Vec::with_capacity(nx * ny);
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let (cx, cy) = (x0 + i as f64 * hx, y0 + j as f64 * hy);
+                        units.push(
+                            (0..n)
+                                .map(|k| hat(s.x_mm[k], cx, hx) * hat(s.y_mm[k], cy, hy))
+                                .collect(),
+                        );
+                        at.push((cx, cy));
+                    }
+                }
+                let mut sh = Shape::units(basis, units, at, p);
+                sh.step = (hx, hy);
+                Some(sh)
+            }
+        }
+    }
+
+    /// Relative rate of every unit (to the dwell-weighted mean rate), from the fitted linear
+    /// coefficients: unit j's rate is `s0 + c_j` (c_0 = 0, the reference).
+    fn relative(&self, lin: &Linear) -> Vec<f64> {
+        let s0 = lin.s0();
+        let mut u = vec![1.0];
+        u.extend(self.cols.iter().map(|(n, _)| 1.0 + lin.get(n) / s0));
+        let w: f64 = self.dwell.iter().sum();
+        let mean = u.iter().zip(&self.dwell).map(|(a, b)| a * b).sum::<f64>() / w.max(1e-300);
+        u.iter().map(|v| v / mean - 1.0).collect()
+    }
+}
+
+/// A fitted fallback.
+#[derive(Debug, Clone)]
+pub struct Fallback {
+    pub shape: Arc<Shape>,
+}
+
+/// Indices of the units whose |relative rate| is at least half the largest, largest first (at
+/// most `n`).
+fn deviating(rel: &[f64], n: usize) -> Vec<usize> {
+    let max = rel.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    let mut idx: Vec<usize> = (0..rel.len())
+        .filter(|&i| max > 0.0 && rel[i].abs() >= 0.5 * max)
+        .collect();
+    idx.sort_by(|&a, &b| rel[b].abs().total_cmp(&rel[a].abs()).then(a.cmp(&b)));
+    idx.truncate(n);
+    idx
+}
+
+fn pct(v: f64) -> String {
+    format!("{:+.1} %", 100.0 * v)
+}
+
+impl Effect for Fallback {
+    fn kind(&self) -> &'static str {
+        self.shape.basis.kind()
+    }
+    fn key(&self) -> String {
+        self.shape.basis.kind().into()
+    }
+    fn boxed_clone(&self) -> Box<dyn Effect> {
+        Box::new(self.clone())
+    }
+    fn rate_terms(&self, _p: &Problem) -> Vec<(String, Vec<f64>)> {
+        self.shape.cols.clone()
+    }
+    fn params(&self, lin: &Linear) -> Vec<(String, Param)> {
+        let sh = &self.shape;
+        match sh.basis {
+            Basis::Direction => {
+                let axis = sh.raster.as_ref().map_or("x", |r| r.axis());
+                let f = lin.get(&sh.cols[0].0) / lin.s0();
+                vec![
+                    ("axis".into(), Param::Text(axis.into())),
+                    ("fraction".into(), Param::Num(f)),
+                    (
+                        "summary".into(),
+                        Param::Text(format!(
+                            "rate {} on lines travelled in +{axis}, {} in -{axis} \
+                             (relative to the rate at turns)",
+                            pct(f),
+                            pct(-f)
+                        )),
+                    ),
+                ]
+            }
+            Basis::Line => {
+                let (axis, cross) = sh
+                    .raster
+                    .as_ref()
+                    .map_or(("x", "y"), |r| (r.axis(), r.cross()));
+                let rel = sh.relative(lin);
+                let dev = deviating(&rel, 8);
+                let list: Vec<String> = dev
+                    .iter()
+                    .map(|&i| format!("{cross} = {:.1} mm ({})", sh.at[i].0, pct(rel[i])))
+                    .collect();
+                let rms = (rel.iter().map(|v| v * v).sum::<f64>() / rel.len() as f64).sqrt();
+                vec![
+                    ("axis".into(), Param::Text(axis.into())),
+                    (
+                        "line_position_mm".into(),
+                        Param::List(sh.at.iter().map(|a| a.0).collect()),
+                    ),
+                    ("rate_change_fraction".into(), Param::List(rel)),
+                    (
+                        "summary".into(),
+                        Param::Text(format!(
+                            "rate differs between raster lines (along {axis}) by {:.1} % RMS; \
+                             largest: {}",
+                            100.0 * rms,
+                            list.join(", ")
+                        )),
+                    ),
+                ]
+            }
+            Basis::Window => {
+                let rel = sh.relative(lin);
+                let dev = deviating(&rel, 6);
+                let list: Vec<String> = dev
+                    .iter()
+                    .map(|&i| {
+                        format!(
+                            "{:.0}-{:.0} s ({})",
+                            sh.at[i].0,
+                            sh.at[i].0 + sh.step.0,
+                            pct(rel[i])
+                        )
+                    })
+                    .collect();
+                vec![
+                    (
+                        "window_start_s".into(),
+                        Param::List(sh.at.iter().map(|a| a.0).collect()),
+                    ),
+                    ("window_s".into(), Param::Num(sh.step.0)),
+                    ("rate_change_fraction".into(), Param::List(rel)),
+                    (
+                        "summary".into(),
+                        Param::Text(format!(
+                            "rate varies between time windows; largest: {}",
+                            list.join(", ")
+                        )),
+                    ),
+                ]
+            }
+            Basis::Map => {
+                let rel = sh.relative(lin);
+                let (mut hi, mut lo) = (0, 0);
+                for i in 0..rel.len() {
+                    if rel[i] > rel[hi] {
+                        hi = i;
+                    }
+                    if rel[i] < rel[lo] {
+                        lo = i;
+                    }
+                }
+                vec![
+                    (
+                        "knot_x_mm".into(),
+                        Param::List(sh.at.iter().map(|a| a.0).collect()),
+                    ),
+                    (
+                        "knot_y_mm".into(),
+                        Param::List(sh.at.iter().map(|a| a.1).collect()),
+                    ),
+                    ("rate_change_fraction".into(), Param::List(rel.clone())),
+                    (
+                        "summary".into(),
+                        Param::Text(format!(
+                            "rate varies over the part (bilinear map, knots {:.1} x {:.1} mm): \
+                             highest {} near (x, y) = ({:.1}, {:.1}) mm, lowest {} near \
+                             ({:.1}, {:.1}) mm",
+                            sh.step.0,
+                            sh.step.1,
+                            pct(rel[hi]),
+                            sh.at[hi].0,
+                            sh.at[hi].1,
+                            pct(rel[lo]),
+                            sh.at[lo].0,
+                            sh.at[lo].1
+                        )),
+                    ),
+                ]
+            }
+        }
+    }
+}
+
+/// Prescreen threshold: the residual's projection on a basis (sum over its columns of the
+/// squared matched-filter projections) over the median of the same for `FLIPS` copies of the
+/// residual with the signs of its hold-out blocks flipped at random (same amplitude and local
+/// correlation, no coherence across blocks).
+pub const PRESCREEN: f64 = 2.5;
+const FLIPS: u64 = 8;
+
+/// Matched filter (rate channel, times the samples' dwell) of the residual and of `FLIPS`
+/// block-sign-flipped copies of it; `None` when the forward model cannot evaluate it.
+fn flipped_matched(cur: &Current) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
+    let r = cur.resid_map();
+    let g = &cur.p.grid;
+    let b = (g.rows.min(g.cols) / 10).max(4);
+    let nbc = g.cols.div_ceil(b);
+    let dt = &cur.p.samples.dt_s;
+    let run = |m: &ndarray::Array2<f64>| -> Option<Vec<f64>> {
+        let h = cur
+            .ev
+            .kernels
+            .lock()
+            .ok()?
+            .matched(Channel::Value, m, &cur.ev.exec)
+            .ok()?;
+        Some(h.iter().zip(dt).map(|(v, d)| v * d).collect())
+    };
+    let obs = run(&r)?;
+    let mut null = Vec::with_capacity(FLIPS as usize);
+    for f in 0..FLIPS {
+        let mut m = r.clone();
+        for ((i, j), v) in m.indexed_iter_mut() {
+            let blk = ((i / b) * nbc + j / b) as u64;
+            if splitmix(blk ^ (f + 1).wrapping_mul(0xA076_1D64_78BD_642F)) & 1 == 1 {
+                *v = -*v;
+            }
+        }
+        null.push(run(&m)?);
+    }
+    Some((obs, null))
+}
+
+fn splitmix(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Sum over a basis' columns of the squared projection of the residual (matched filter `h`,
+/// per sample) on the column's dwell-centred rate weights.
+fn projection(sh: &Shape, h: &[f64], dt: &[f64]) -> f64 {
+    let hs: f64 = h.iter().sum();
+    let w: f64 = dt.iter().sum();
+    sh.cols
+        .iter()
+        .map(|(_, g)| {
+            let m = g.iter().zip(dt).map(|(a, b)| a * b).sum::<f64>() / w.max(1e-300);
+            let b = g.iter().zip(h).map(|(a, b)| a * b).sum::<f64>() - m * hs;
+            b * b
+        })
+        .sum()
+}
+
+/// Whether a fallback's held-out score clears the stricter bar (see the module note).
+pub fn passes(s: &Score, n_params: usize) -> bool {
+    s.significant()
+        && s.z >= FALLBACK_Z
+        && s.fraction >= FALLBACK_FRACTION * (n_params.max(1) as f64).sqrt()
+}
+
+/// The fallback candidates not yet accepted whose own held-out score clears the bar.
+pub fn candidates(cur: &Current) -> Vec<Candidate> {
+    let fresh: Vec<Basis> = Basis::ALL
+        .into_iter()
+        .filter(|b| !cur.has(b.kind()))
+        .collect();
+    if fresh.is_empty() {
+        return Vec::new();
+    }
+    let p = cur.p;
+    let raster = Raster::of(p).map(Arc::new);
+    let shapes: Vec<Shape> = fresh
+        .into_iter()
+        .filter_map(|b| Shape::of(b, p, raster.as_ref()))
+        .collect();
+    // Prescreen (matched filters only): the many-column bases go on to their columns only
+    // when the residual projects on them more than block-sign-flipped copies of it do.
+    let flips = flipped_matched(cur);
+    let trace = std::env::var_os("BONNETLAB_TRACE").is_some();
+    let shapes: Vec<Shape> = shapes
+        .into_iter()
+        .filter(|sh| {
+            if sh.cols.len() <= 1 {
+                return true;
+            }
+            let Some((obs, null)) = &flips else {
+                return true;
+            };
+            let t = projection(sh, obs, &p.samples.dt_s);
+            let mut tn: Vec<f64> = null
+                .iter()
+                .map(|h| projection(sh, h, &p.samples.dt_s))
+                .collect();
+            tn.sort_by(|a, b| a.total_cmp(b));
+            let med = tn[tn.len() / 2];
+            if trace {
+                eprintln!(
+                    "fallback prescreen {}: {:.2} x the flipped median",
+                    sh.basis.kind(),
+                    t / med.max(1e-300)
+                );
+            }
+            t >= PRESCREEN * med
+        })
+        .collect();
+    if shapes.is_empty() {
+        return Vec::new();
+    }
+    let sp = split(p);
+    let bg = base_gram(cur.ev, &sp);
+    let mut out = Vec::new();
+    for shape in shapes {
+        let b = shape.basis;
+        let extra: Vec<Vec<f64>> = shape
+            .cols
+            .iter()
+            .map(|(_, g)| {
+                let m = p.samples.dwell_mean(g);
+                let gc: Vec<f64> = g.iter().map(|v| v - m).collect();
+                cur.column(&[(&gc, Channel::Value)])
+            })
+            .collect();
+        let score = holdout(cur.ev, &extra, &sp, &bg);
+        if trace {
+            eprintln!(
+                "fallback {}: held-out z {:.1}, reduction {:.3} ({} columns)",
+                b.kind(),
+                score.z,
+                score.fraction,
+                extra.len()
+            );
+        }
+        if !passes(&score, extra.len()) {
+            continue;
+        }
+        let shape = Arc::new(shape);
+        out.push(Candidate {
+            key: b.kind().into(),
+            kind: b.kind(),
+            extra,
+            make: Box::new(move |_, _| {
+                Box::new(Fallback {
+                    shape: shape.clone(),
+                })
+            }),
+        });
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearest_line() {
+        let v = [0.0, 2.0, 4.0];
+        assert_eq!(nearest(&v, -1.0), 0);
+        assert_eq!(nearest(&v, 0.9), 0);
+        assert_eq!(nearest(&v, 1.1), 1);
+        assert_eq!(nearest(&v, 3.5), 2);
+        assert_eq!(nearest(&v, 9.0), 2);
+    }
+
+    #[test]
+    fn deviating_units_are_the_large_ones() {
+        let rel = [0.0, 0.05, -0.01, -0.06, 0.02];
+        assert_eq!(deviating(&rel, 8), vec![3, 1]);
+    }
+}
