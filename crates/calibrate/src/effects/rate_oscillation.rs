@@ -56,7 +56,7 @@ impl Effect for RateOscillation {
         let s0 = lin.s0();
         let amp = lin.get("rate:osc_sin").hypot(lin.get("rate:osc_cos")) / s0;
         let duration = p.samples.t1_s - p.samples.t0_s;
-        if !(amp < 1.0) {
+        if amp.is_nan() || amp >= 1.0 {
             Some(format!(
                 "amplitude {amp:.3} of the rate is not below 1 (the rate would turn negative)"
             ))
