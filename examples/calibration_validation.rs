@@ -9,8 +9,15 @@
 //! ```text
 //! cargo run --release --example calibration_validation -- [--runs 50] [--size 400]
 //!     [--seed 1] [--sizes 0.5,1,2] [--kinds null,registration,...] [--out reports/calibration.md]
-//!     [--no-time]
+//!     [--no-time] [--signal]
 //! ```
+//!
+//! `--signal` (a diagnostic, logged per run on stderr, not tabulated): the injected effect's
+//! identifiable signal, i.e. the effect run's after map minus its twin's without the effect (same
+//! seed: same part, noise and dropouts) with the baseline columns (rate scale, piston, tilt)
+//! projected out, as an RMS and over the true floor; the share of it the kind's linearised
+//! candidate column(s) explain and the parameters implied by that column on the run's own
+//! removal; and the first round's held-out z of the kind's candidate and of the best ones.
 //!
 //! Runs (scenario r of a given seed is the same for every kind, so kinds are comparable and
 //! null runs are the twins of the effect runs): a 100 mm square part on an n x n map (pixel
@@ -63,6 +70,7 @@ struct Args {
     kinds: Vec<String>,
     out: PathBuf,
     time: bool,
+    signal: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -78,6 +86,7 @@ fn parse_args() -> Result<Args, String> {
             .collect(),
         out: PathBuf::from("reports/calibration.md"),
         time: true,
+        signal: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -95,6 +104,7 @@ fn parse_args() -> Result<Args, String> {
             "--kinds" => a.kinds = val()?.split(',').map(String::from).collect(),
             "--out" => a.out = PathBuf::from(val()?),
             "--no-time" => a.time = false,
+            "--signal" => a.signal = true,
             other => return Err(format!("unknown option {other}")),
         }
     }
@@ -443,6 +453,71 @@ fn assess(kind: &str, truth: &Truth, cal: &Calibration, true_floor: f64) -> Outc
     o
 }
 
+/// `--signal`: the effect's identifiable signal and its candidate column's fit (see the header).
+fn signal(
+    kind: &str,
+    run: &bonnetlab::calibrate::synth::SynthRun,
+    twin: &bonnetlab::calibrate::synth::SynthRun,
+) -> Result<String, String> {
+    use bonnetlab::calibrate::effects::{candidates, Current};
+    use bonnetlab::calibrate::model::{evaluate, fit};
+    let p = problem_with_spot(
+        &run.before,
+        &run.after,
+        &run.spot,
+        run.spot_dwell_s,
+        &run.path,
+    )
+    .map_err(|e| e.to_string())?;
+    let ev = evaluate(&p, &[], None).map_err(|e| e.to_string())?;
+    let f = fit(&ev, &[]).map_err(|e| e.to_string())?;
+    // d = removal(effect) - removal(twin) = twin.after - run.after (same before map).
+    let d_full = twin.after.heights_nm() - run.after.heights_nm();
+    let d = p.compress(&d_full);
+    let mut ev_d = evaluate(&p, &[], Some(&ev)).map_err(|e| e.to_string())?;
+    ev_d.m = d
+        .iter()
+        .zip(&ev.w)
+        .map(|(v, w)| if *w > 0.0 && v.is_finite() { *v } else { 0.0 })
+        .collect();
+    let fd = fit(&ev_d, &[]).map_err(|e| e.to_string())?;
+    let sig = fd.rms();
+    let cur = Current {
+        p: &p,
+        ev: &ev,
+        resid: &f.resid,
+        accepted: &[],
+    };
+    let mut out = format!(
+        "{:.3} nm = {:.2} x floor;",
+        sig,
+        sig / run.true_noise_floor_nm
+    );
+    for c in candidates(&cur)
+        .into_iter()
+        .filter(|c| c.kind == lib_name(kind))
+    {
+        let fdc = fit(&ev_d, &c.extra).map_err(|e| e.to_string())?;
+        let fc = fit(&ev, &c.extra).map_err(|e| e.to_string())?;
+        let nb = ev.cols.len();
+        let e = (c.make)(&fc.coef[nb..], fc.coef[0]);
+        out.push_str(&format!(
+            " {}: column explains {:.1} % of it, implied nl {:?} coef {:?};",
+            c.key,
+            100.0 * (1.0 - fdc.rss / fd.rss.max(1e-300)),
+            e.nl()
+                .iter()
+                .map(|v| (v * 1e4).round() / 1e4)
+                .collect::<Vec<_>>(),
+            fc.coef[nb..]
+                .iter()
+                .map(|v| (v / fc.coef[0] * 1e4).round() / 1e4)
+                .collect::<Vec<_>>(),
+        ));
+    }
+    Ok(out)
+}
+
 fn median(mut v: Vec<f64>) -> Option<f64> {
     v.retain(|x| x.is_finite());
     if v.is_empty() {
@@ -513,6 +588,17 @@ fn main() {
                     continue;
                 }
             };
+            if args.signal && LIBRARY.contains(&kind.as_str()) && kind != "registration" {
+                let mut twin = cfg.clone();
+                twin.effects.clear();
+                match generate(&twin) {
+                    Ok(tw) => eprintln!(
+                        "{kind} x{size} run {r}: signal {}",
+                        signal(kind, &run, &tw).unwrap_or_else(|e| format!("failed: {e}"))
+                    ),
+                    Err(e) => eprintln!("{kind} x{size} run {r}: twin: {e}"),
+                }
+            }
             let t = Instant::now();
             let res = problem_with_spot(
                 &run.before,
@@ -528,6 +614,28 @@ fn main() {
                     let mut o = assess(kind, &truth, &cal, run.true_noise_floor_nm);
                     o.wall_s = wall;
                     let kinds: Vec<&str> = cal.effects.iter().map(|e| e.kind.as_str()).collect();
+                    if args.signal {
+                        if let Some(r0) = cal.rounds.first() {
+                            let mut c: Vec<_> = r0.candidates.iter().collect();
+                            c.sort_by(|a, b| b.z.total_cmp(&a.z));
+                            let mine = c.iter().find(|s| s.key.starts_with(lib_name(kind)));
+                            eprintln!(
+                                "{kind} x{size} run {r}: round 0 z: own {} best {}",
+                                mine.map_or("-".into(), |s| format!(
+                                    "{} {:.1} ({:.3})",
+                                    s.key, s.z, s.heldout_reduction_fraction
+                                )),
+                                c.iter()
+                                    .take(4)
+                                    .map(|s| format!(
+                                        "{} {:.1} ({:.3})",
+                                        s.key, s.z, s.heldout_reduction_fraction
+                                    ))
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            );
+                        }
+                    }
                     eprintln!(
                         "{kind} x{size} run {r}: {:?} unexplained {} final/floor {:.2} floor/true {:.2} err {} {:.1} s{}",
                         kinds,

@@ -69,6 +69,12 @@ pub trait Effect: Send + Sync {
     }
     /// Reported parameters, from the fitted linear coefficients.
     fn params(&self, lin: &Linear) -> Vec<(String, Param)>;
+    /// Why this fitted state cannot be physical (a wiggle larger than the spot, a period the
+    /// path cannot sample, a scale at the kernel's bound), or `None`. Checked on every refined
+    /// contender; an implausible one is rejected with this reason (`run`).
+    fn implausible(&self, _p: &Problem, _lin: &Linear) -> Option<String> {
+        None
+    }
 }
 
 impl Clone for Box<dyn Effect> {

@@ -59,7 +59,44 @@ pub struct EffectReport {
     pub significance: f64,
     /// Held-out reduction of the residual sum of squares, as a fraction.
     pub heldout_reduction_fraction: f64,
+    /// Other kinds that explained the same residual in the round this effect was accepted
+    /// (refined reduction of the mean square within [`TIE_FRACTION`] of this one's): the
+    /// preferred one has the fewest parameters (see `settle`).
+    pub alternatives: Vec<Alternative>,
 }
+
+/// A contender that tied with an accepted effect.
+#[derive(Debug, Clone, Serialize)]
+pub struct Alternative {
+    pub kind: String,
+    pub key: String,
+    /// Fitted parameters of the alternative (non-linear and rate terms).
+    pub n_params: usize,
+    pub params: Map<String, Value>,
+    pub residual_rms_after_nm: f64,
+}
+
+/// A refined contender rejected as physically implausible, with the reason.
+#[derive(Debug, Clone, Serialize)]
+pub struct Rejected {
+    pub key: String,
+    pub reason: String,
+}
+
+/// Correlation of two accepted effects' parameters in the joint refit.
+#[derive(Debug, Clone, Serialize)]
+pub struct Correlation {
+    /// `kind.param` of each.
+    pub a: String,
+    pub b: String,
+    pub r: f64,
+}
+
+/// Two contenders tie when the smaller reduction of the mean square is at least this share
+/// of the larger.
+pub const TIE_FRACTION: f64 = 0.9;
+/// Parameter pairs of different accepted effects reported in `correlations` from this |r|.
+pub const STRONG_CORRELATION: f64 = 0.8;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct CandidateScore {
@@ -72,6 +109,8 @@ pub struct CandidateScore {
 pub struct Round {
     pub accepted: Option<String>,
     pub candidates: Vec<CandidateScore>,
+    /// Refined contenders rejected as physically implausible.
+    pub rejected: Vec<Rejected>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -82,6 +121,8 @@ pub struct Calibration {
     pub noise_floor_rms_nm: f64,
     pub effects: Vec<EffectReport>,
     pub unexplained: Vec<Unexplained>,
+    /// Strongly correlated parameters of different accepted effects (joint refit).
+    pub correlations: Vec<Correlation>,
     /// Every round's candidate scores (the diagnosis trail).
     pub rounds: Vec<Round>,
     #[serde(skip)]
@@ -289,6 +330,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     let mut rounds = Vec::new();
     let mut accepted: Vec<(String, f64, f64, Score)> = Vec::new(); // key, rms before, rms after, score
     let mut blocked: Vec<String> = Vec::new();
+    let mut alternatives: Vec<(String, Vec<Alternative>)> = Vec::new();
     let trace = std::env::var_os("BONNETLAB_TRACE").is_some();
     let t0 = std::time::Instant::now();
     // What the model can be trusted to: the noise floor and the forward model's own accuracy
@@ -320,6 +362,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             .collect();
         let mut round = Round {
             accepted: None,
+            rejected: Vec::new(),
             candidates: cands
                 .iter()
                 .zip(&scores)
@@ -384,7 +427,26 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                     f_t.rms()
                 );
             }
+            let lin = ev_t.linear(&f_t);
+            if let Some(reason) = trial.iter().find_map(|e| {
+                e.implausible(p, &lin)
+                    .map(|why| format!("{}: {why}", e.key()))
+            }) {
+                if trace {
+                    eprintln!("[{:?}] rejected {}: {reason}", t0.elapsed(), cand.key);
+                }
+                blocked.push(cand.key.clone());
+                round.rejected.push(Rejected {
+                    key: cand.key.clone(),
+                    reason,
+                });
+                continue;
+            }
             refined.push((ci, trial, ev_t, f_t));
+        }
+        if refined.is_empty() {
+            rounds.push(round);
+            continue;
         }
         let pick = settle(
             rms_before,
@@ -393,6 +455,26 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         );
         let (bi, trial, ev_t, f_t) = refined.swap_remove(pick);
         let cand = &cands[bi];
+        let gain = |r: f64| rms_before * rms_before - r * r;
+        let ties: Vec<Alternative> = refined
+            .iter()
+            .filter(|r| gain(r.3.rms()) >= TIE_FRACTION * gain(f_t.rms()) && gain(r.3.rms()) > 0.0)
+            .filter_map(|(ci, tr, ev_a, f_a)| {
+                let e = tr.last()?;
+                let lin = ev_a.linear(f_a);
+                Some(Alternative {
+                    kind: e.kind().into(),
+                    key: cands[*ci].key.clone(),
+                    n_params: e.nl().len() + e.rate_terms(p).len(),
+                    params: e
+                        .params(&lin)
+                        .into_iter()
+                        .map(|(n, v)| (n, param_value(&v)))
+                        .collect(),
+                    residual_rms_after_nm: f_a.rms(),
+                })
+            })
+            .collect();
         let score = scores[bi];
         if f_t.rms() >= rms_before {
             blocked.push(cand.key.clone());
@@ -401,6 +483,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         }
         round.accepted = Some(cand.key.clone());
         rounds.push(round);
+        alternatives.push((cand.key.clone(), ties));
         accepted.push((cand.key.clone(), rms_before, f_t.rms(), score));
         effects = trial;
         ev = ev_t;
@@ -425,11 +508,14 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     }
     let lin = ev.linear(&f);
     maps.effect_removal_nm = effect_removals(p, &effects, &ev, &f)?;
-    let sig = if effects.is_empty() {
-        Vec::new()
+    let (sig, corr) = if effects.is_empty() {
+        (Vec::new(), Vec::new())
     } else {
-        crate::uncertainty::uncertainties(p, &effects, &ev, &f, &sp).unwrap_or_default()
+        crate::uncertainty::uncertainties_and_correlations(p, &effects, &ev, &f, &sp)
+            .unwrap_or_default()
     };
+    // Names of the flat numeric parameters (the order of `sig`), with their effect's index.
+    let mut flat_names: Vec<(usize, String)> = Vec::new();
     let mut k = 0;
     let mut reports = Vec::new();
     for (e, (_, rb, ra, score)) in effects.iter().zip(&accepted) {
@@ -438,12 +524,16 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         for (name, v) in e.params(&lin) {
             match &v {
                 Param::Num(_) => {
+                    flat_names.push((reports.len(), format!("{}.{name}", e.kind())));
                     if let Some(s) = sig.get(k) {
                         unc.insert(name.clone(), serde_json::json!(s));
                     }
                     k += 1;
                 }
                 Param::List(xs) => {
+                    for i in 0..xs.len() {
+                        flat_names.push((reports.len(), format!("{}.{name}[{i}]", e.kind())));
+                    }
                     let s: Vec<f64> = (0..xs.len())
                         .map(|i| sig.get(k + i).copied().unwrap_or(f64::NAN))
                         .collect();
@@ -464,7 +554,29 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             residual_rms_after_nm: *ra,
             significance: score.z,
             heldout_reduction_fraction: score.fraction,
+            alternatives: alternatives
+                .iter()
+                .find(|(key, _)| *key == e.key())
+                .map(|(_, a)| a.clone())
+                .unwrap_or_default(),
         });
+    }
+    let mut correlations = Vec::new();
+    for (i, (ei, ni)) in flat_names.iter().enumerate() {
+        for (j, (ej, nj)) in flat_names.iter().enumerate().skip(i + 1) {
+            let r = corr
+                .get(i)
+                .and_then(|row| row.get(j))
+                .copied()
+                .unwrap_or(0.0);
+            if ei != ej && r.abs() >= STRONG_CORRELATION {
+                correlations.push(Correlation {
+                    a: ni.clone(),
+                    b: nj.clone(),
+                    r,
+                });
+            }
+        }
     }
     // The floor of the measured removal at the final registration (texture cancels).
     let noise = initial_noise_floor(
@@ -485,6 +597,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         noise_floor_rms_nm: noise,
         effects: reports,
         unexplained,
+        correlations,
         rounds,
         maps,
     })

@@ -39,6 +39,19 @@ pub fn uncertainties(
     f: &Fit,
     blocks: &Split,
 ) -> Result<Vec<f64>, CalibrateError> {
+    uncertainties_and_correlations(p, effects, ev, f, blocks).map(|(s, _)| s)
+}
+
+/// [`uncertainties`] and the correlation matrix of the same reported parameters, from the
+/// classical covariance `(J^T J)^-1` of the joint fit (the scale `s^2` cancels): how far the
+/// data tell one accepted effect's parameter from another's.
+pub fn uncertainties_and_correlations(
+    p: &Problem,
+    effects: &[Box<dyn Effect>],
+    ev: &Eval,
+    f: &Fit,
+    blocks: &Split,
+) -> Result<(Vec<f64>, Vec<Vec<f64>>), CalibrateError> {
     let lin_cols: Vec<Vec<f64>> = ev
         .cols
         .iter()
@@ -88,7 +101,35 @@ pub fn uncertainties(
             g[j] = (v - b) / h;
         }
     }
-    Ok(grads
+    let m = grads.len();
+    let mut pc = vec![vec![0.0; m]; m];
+    for i in 0..m {
+        for j in i..m {
+            let mut s = 0.0;
+            for a in 0..n {
+                for b in 0..n {
+                    s += grads[i][a] * cov[a][b] * grads[j][b];
+                }
+            }
+            pc[i][j] = s;
+            pc[j][i] = s;
+        }
+    }
+    let corr: Vec<Vec<f64>> = (0..m)
+        .map(|i| {
+            (0..m)
+                .map(|j| {
+                    let d = (pc[i][i] * pc[j][j]).sqrt();
+                    if d > 0.0 && d.is_finite() {
+                        (pc[i][j] / d).clamp(-1.0, 1.0)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let sig = grads
         .iter()
         .map(|g| {
             let quad = |c: &[Vec<f64>]| {
@@ -108,7 +149,8 @@ pub fn uncertainties(
                 .unwrap_or(0.0);
             (classical.max(clustered).max(0.0) + systematic * systematic).sqrt()
         })
-        .collect())
+        .collect();
+    Ok((sig, corr))
 }
 
 /// Smoothing (pixels) of the after map for the second registration estimating equation.

@@ -38,6 +38,15 @@ impl Effect for DirectionLag {
             ys[k] -= self.lag_mm * p.samples.uy[k];
         }
     }
+    fn implausible(&self, p: &Problem, _lin: &Linear) -> Option<String> {
+        (self.lag_mm.abs() > p.tif_radius_mm).then(|| {
+            format!(
+                "lag {:.3} mm is larger than the spot (radius {:.3} mm)",
+                self.lag_mm.abs(),
+                p.tif_radius_mm
+            )
+        })
+    }
     fn params(&self, _lin: &Linear) -> Vec<(String, Param)> {
         vec![("lag_mm".into(), Param::Num(self.lag_mm))]
     }

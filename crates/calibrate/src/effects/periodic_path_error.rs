@@ -85,12 +85,32 @@ impl Effect for PeriodicPathError {
             *t += self.a * (w * qk).sin() + self.b * (w * qk).cos();
         }
     }
-    fn params(&self, _lin: &Linear) -> Vec<(String, Param)> {
-        let period_mm = if self.coord == Coord::Time {
-            self.period * self.mean_feed
+    fn implausible(&self, p: &Problem, _lin: &Linear) -> Option<String> {
+        let amp = self.a.hypot(self.b);
+        let pix = p.grid.dx_mm.max(p.grid.dy_mm);
+        let period_mm = self.period_mm();
+        let min_period = min_period_mm(p, self.coord);
+        if amp > p.tif_radius_mm {
+            Some(format!(
+                "amplitude {amp:.3} mm is larger than the spot (radius {:.3} mm)",
+                p.tif_radius_mm
+            ))
+        } else if period_mm < min_period {
+            Some(format!(
+                "period {period_mm:.3} mm is below what the path samples in {} ({min_period:.3} mm): it aliases onto the raster lines",
+                self.coord.name()
+            ))
+        } else if period_mm < 2.0 * pix {
+            Some(format!(
+                "period {period_mm:.3} mm is below two map pixels ({:.3} mm)",
+                2.0 * pix
+            ))
         } else {
-            self.period
-        };
+            None
+        }
+    }
+    fn params(&self, _lin: &Linear) -> Vec<(String, Param)> {
+        let period_mm = self.period_mm();
         let mut v = vec![
             (
                 "axis".into(),
@@ -108,6 +128,30 @@ impl Effect for PeriodicPathError {
             v.push(("period_s".into(), Param::Num(self.period)));
         }
         v
+    }
+}
+
+impl PeriodicPathError {
+    /// The period in mm (a time period through the mean feed).
+    pub fn period_mm(&self) -> f64 {
+        if self.coord == Coord::Time {
+            self.period * self.mean_feed
+        } else {
+            self.period
+        }
+    }
+}
+
+/// Shortest period (mm) a wiggle in coordinate `coord` can have and still be sampled by the
+/// path: across the raster lines (x for lines along y, y for lines along x) the path visits
+/// the coordinate only at the line spacing, so anything below two spacings aliases onto the
+/// lines; along the path (x or y along the lines, arc length, time) no bound beyond the map's.
+pub fn min_period_mm(p: &Problem, coord: Coord) -> f64 {
+    let s = &p.samples;
+    match coord {
+        Coord::X => 2.0 * line_spacing(s, false).unwrap_or(0.0),
+        Coord::Y => 2.0 * line_spacing(s, true).unwrap_or(0.0),
+        Coord::Arc | Coord::Time => 0.0,
     }
 }
 

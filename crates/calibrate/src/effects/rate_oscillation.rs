@@ -52,6 +52,23 @@ impl Effect for RateOscillation {
     fn rate_terms(&self, p: &Problem) -> Vec<(String, Vec<f64>)> {
         terms(p, self.period_s)
     }
+    fn implausible(&self, p: &Problem, lin: &Linear) -> Option<String> {
+        let s0 = lin.s0();
+        let amp = lin.get("rate:osc_sin").hypot(lin.get("rate:osc_cos")) / s0;
+        let duration = p.samples.t1_s - p.samples.t0_s;
+        if amp.is_nan() || amp >= 1.0 {
+            Some(format!(
+                "amplitude {amp:.3} of the rate is not below 1 (the rate would turn negative)"
+            ))
+        } else if self.period_s > duration {
+            Some(format!(
+                "period {:.1} s is longer than the run ({duration:.1} s)",
+                self.period_s
+            ))
+        } else {
+            None
+        }
+    }
     fn params(&self, lin: &Linear) -> Vec<(String, Param)> {
         let s0 = lin.s0();
         let (a, b) = (lin.get("rate:osc_sin") / s0, lin.get("rate:osc_cos") / s0);
