@@ -10,10 +10,13 @@ use super::recipe_samples::{self, RECIPE_SEED};
 use super::samples::{generate, paper_bonnets, SampleMap};
 use super::{Error, Progress};
 
-/// The generated sample: the repeat maps and, per recipe run, its name and files (name, bytes).
+/// One recipe run's files: (file name, bytes).
+pub type RunFiles = Vec<(String, Vec<u8>)>;
+
+/// The generated sample: the repeat maps and, per recipe run, its name and files.
 pub struct Samples {
     pub maps: Vec<SampleMap>,
-    pub runs: Vec<(&'static str, Vec<(String, Vec<u8>)>)>,
+    pub runs: Vec<(&'static str, RunFiles)>,
 }
 
 /// Generates the sample maps (`seed`, `repeats` measurements per map) and the recipe runs

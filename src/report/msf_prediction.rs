@@ -93,6 +93,7 @@ pub fn section(page: &mut Page, preds: &[PredictedMsf]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use bonnetlab_vibration::coupling::predict::MechanismResult;
 
     #[test]
     fn section_lists_every_mechanism_with_its_share() {

@@ -3,6 +3,9 @@
 //! and calibrate it through the pipeline the CLI calls (`bonnetlab::pipeline::calibrate`), and
 //! describe the outcome for assertion messages.
 
+// Each test file includes the whole module and uses only part of it.
+#![allow(dead_code)]
+
 use bonnetlab::calibrate::run::{Calibration, Options};
 use bonnetlab::calibrate::synth::write::write_run;
 use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig};
