@@ -1,13 +1,14 @@
 //! Exact time-domain deposition with a per-instant modulation hook: at every sub-step of the
 //! path the caller may displace the tool from the logged position, scale the removal rate and
-//! widen the footprint. This is [`crate::removal::deposit_exact`] for processes whose rate,
-//! spot shape or executed position vary in time or along the path in ways a per-sample weight
-//! cannot express (a spot that grows, a rate that depends on the travel direction or on where
-//! the tool is, a lag or a wiggle of the executed position). The synthetic-run generator uses
-//! it as its independent truth, and the vibration coupling as its direct reference (the
-//! instantaneous TIF under the robot's vibration, `bonnetlab_vibration::coupling::direct`),
-//! also the deposition of the bundled recipe runs; it shares the deposition kernel and
-//! sub-stepping of `deposit_exact`, never the FFT model.
+//! widen the footprint. This is the project's one exact deposition:
+//! [`crate::removal::deposit_exact`] calls it with the per-sample weights as the rate factor,
+//! and it serves processes whose rate, spot shape or executed position vary in time or along
+//! the path in ways a per-sample weight cannot express (a spot that grows, a rate that depends
+//! on the travel direction or on where the tool is, a lag or a wiggle of the executed
+//! position). The synthetic-run generator uses it as its independent truth, and the vibration
+//! coupling as its direct reference (the instantaneous TIF under the robot's vibration,
+//! `bonnetlab_vibration::coupling::direct`), also the deposition of the bundled recipe runs;
+//! it never uses the FFT model.
 //!
 //! Footprint widening by `scale` s: the rate at offset r is `T(r / s)` (peak unchanged, volume
 //! times s^2), with the footprint's half-extent times s.
@@ -34,6 +35,8 @@ pub struct SubStep {
     pub vy_mm_per_s: f64,
     /// Index of that segment (samples `segment` and `segment + 1`).
     pub segment: usize,
+    /// Where the midpoint lies on that segment (0 at sample `segment`, 1 at the next).
+    pub fraction: f64,
     /// Duration of the sub-step (s).
     pub dt_s: f64,
 }
@@ -95,11 +98,11 @@ impl RateField for Widened<'_> {
 const BLOCK: usize = 1 << 20;
 
 /// Exact deposition (nm on `grid`) of `field` along `path`, modulated at every sub-step by
-/// `modulate`. Sub-steps as [`deposit_exact`](crate::removal::deposit_exact) (midpoint rule;
-/// default length a quarter pixel and at most 1/80 of the nominal footprint's smaller
-/// half-extent; at most `opts.max_dt_s` in time). The hook is called once per sub-step, in
-/// time order, so it may follow a time series (the vibration coupling's instantaneous TIF:
-/// a lateral displacement, and an offset change as a rate factor and a widening).
+/// `modulate`. Sub-steps of [`exact_step`] (midpoint rule; default length a quarter pixel and
+/// at most 1/80 of the nominal footprint's smaller half-extent; at most `opts.max_dt_s` in
+/// time). The hook is called once per sub-step, in time order, so it may follow a time series
+/// (the vibration coupling's instantaneous TIF: a lateral displacement, and an offset change
+/// as a rate factor and a widening).
 pub fn deposit_exact_modulated(
     path: &PathLog,
     field: &dyn RateField,
@@ -120,17 +123,15 @@ pub fn deposit_exact_modulated(
             .map(|c| {
                 let mut acc = zero();
                 for &[x, y, w, s] in c {
-                    let wf = Widened { inner: field, s };
-                    deposit_one(
-                        &mut acc,
-                        &g,
-                        |dx, dy| wf.rate_at_mm(dx, dy),
-                        x,
-                        y,
-                        w,
-                        ex * s,
-                        ey * s,
-                    );
+                    if s == 1.0 {
+                        // Nominal footprint: no rescaling of every pixel's offset.
+                        let rate = |dx, dy| field.rate_at_mm(dx, dy);
+                        deposit_one(&mut acc, &g, rate, x, y, w, ex, ey);
+                    } else {
+                        let wf = Widened { inner: field, s };
+                        let rate = |dx, dy| wf.rate_at_mm(dx, dy);
+                        deposit_one(&mut acc, &g, rate, x, y, w, ex * s, ey * s);
+                    }
                 }
                 acc
             })
@@ -152,6 +153,7 @@ pub fn deposit_exact_modulated(
             vx_mm_per_s: (path.x_mm[k + 1] - path.x_mm[k]) / seg_dt,
             vy_mm_per_s: (path.y_mm[k + 1] - path.y_mm[k]) / seg_dt,
             segment: k,
+            fraction: fr,
             dt_s: dt,
         };
         let m = modulate(&s);

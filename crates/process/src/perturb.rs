@@ -31,6 +31,7 @@ use rayon::prelude::*;
 use crate::fft::{fast_len, MultiConvolver};
 use crate::grid::Grid;
 use crate::modulated::Modulation;
+use crate::removal::bilinear_taps;
 use crate::tif::RateField;
 
 /// A map axis (the direction of a lateral displacement).
@@ -248,27 +249,14 @@ impl<const N: usize> WeightedDwell<N> {
     pub fn add(&mut self, x_mm: f64, y_mm: f64, dt_s: f64, w: &[f64; N]) {
         let g = &self.grid;
         let (u, v) = g.frac_index(x_mm, y_mm);
-        if !(u > -1.0 && v > -1.0 && u < g.rows as f64 && v < g.cols as f64) {
-            return;
-        }
-        let (i0, j0) = (u.floor() as isize, v.floor() as isize);
-        let (fu, fv) = (u - i0 as f64, v - j0 as f64);
-        for (di, wi) in [(0isize, 1.0 - fu), (1, fu)] {
-            let i = i0 + di;
-            if i < 0 || i as usize >= g.rows {
-                continue;
+        let data = &mut self.data;
+        bilinear_taps(g.rows, g.cols, u, v, |i, j, wi, wj| {
+            let k = wi * wj * dt_s;
+            let cell = &mut data[i * g.cols + j];
+            for c in 0..N {
+                cell[c] += k * w[c];
             }
-            for (dj, wj) in [(0isize, 1.0 - fv), (1, fv)] {
-                let j = j0 + dj;
-                if j >= 0 && (j as usize) < g.cols {
-                    let k = wi * wj * dt_s;
-                    let cell = &mut self.data[i as usize * g.cols + j as usize];
-                    for c in 0..N {
-                        cell[c] += k * w[c];
-                    }
-                }
-            }
-        }
+        });
     }
 
     /// Channel `c` as a map on the grid.

@@ -16,7 +16,6 @@
 //! removal rate (linear between samples): rate drifts, vibration modulation.
 
 use ndarray::{s, Array2, ArrayView2};
-use rayon::prelude::*;
 
 use crate::error::ProcessError;
 use crate::fft::{fast_len, Complex, Convolver, MultiConvolver};
@@ -131,17 +130,37 @@ fn splat_cubic(d: &mut Array2<f64>, u: f64, v: f64, w: f64) {
 
 /// Adds `w` at fractional (row u, col v) with bilinear weights.
 fn splat(d: &mut Array2<f64>, u: f64, v: f64, w: f64) {
-    let (r, c) = d.dim();
-    if !(u > -1.0 && v > -1.0 && u < r as f64 && v < c as f64) {
+    bilinear_taps(d.nrows(), d.ncols(), u, v, |i, j, wi, wj| {
+        d[(i, j)] += w * wi * wj;
+    });
+}
+
+/// The 2 x 2 bilinear splat of a point at fractional (row u, col v) on a `rows` x `cols` grid:
+/// calls `f(i, j, wi, wj)` for every tap inside the grid, with the row and column weights.
+/// Points beyond the outer pixel centres by a pixel or more get none. The one bilinear splat
+/// (the dwell map's, and the N-channel [`crate::perturb::WeightedDwell`]).
+#[inline]
+pub(crate) fn bilinear_taps(
+    rows: usize,
+    cols: usize,
+    u: f64,
+    v: f64,
+    mut f: impl FnMut(usize, usize, f64, f64),
+) {
+    if !(u > -1.0 && v > -1.0 && u < rows as f64 && v < cols as f64) {
         return;
     }
     let (i0, j0) = (u.floor() as isize, v.floor() as isize);
     let (fu, fv) = (u - i0 as f64, v - j0 as f64);
     for (di, wi) in [(0isize, 1.0 - fu), (1, fu)] {
+        let i = i0 + di;
+        if i < 0 || i as usize >= rows {
+            continue;
+        }
         for (dj, wj) in [(0isize, 1.0 - fv), (1, fv)] {
-            let (i, j) = (i0 + di, j0 + dj);
-            if i >= 0 && j >= 0 && (i as usize) < r && (j as usize) < c {
-                d[(i as usize, j as usize)] += w * wi * wj;
+            let j = j0 + dj;
+            if j >= 0 && (j as usize) < cols {
+                f(i as usize, j as usize, wi, wj);
             }
         }
     }
@@ -761,10 +780,10 @@ const EXACT_MAX_SUBSTEPS: f64 = 1e9;
 /// Most pixel updates (sub-steps on the grid times footprint pixels) [`deposit_exact`] does
 /// (a few seconds on two cores).
 const EXACT_MAX_PIXEL_UPDATES: f64 = 4e9;
-/// Sub-steps deposited per block (24 MB of positions).
-const EXACT_BLOCK: usize = 1 << 20;
 
-/// Exact time-domain deposition: removal (nm) on `grid` of the rate field moved along the path.
+/// Exact time-domain deposition: removal (nm) on `grid` of the rate field moved along the path,
+/// the rate times `weights` (linear between samples). The one exact deposition,
+/// [`crate::modulated::deposit_exact_modulated`], with the weight as its rate factor.
 /// Refused, before anything is allocated, when the walk would exceed the limits above.
 pub fn deposit_exact(
     path: &PathLog,
@@ -774,53 +793,12 @@ pub fn deposit_exact(
     opts: &ExactOptions,
 ) -> Result<Array2<f64>, ProcessError> {
     check_weights(path, weights)?;
-    let (ex, ey) = field.half_extent_mm();
-    let step = exact_step(field, grid, opts)?;
-    let (xlo, xhi) = (grid.x0_mm - ex, grid.x_mm(grid.cols - 1) + ex);
-    let (ylo, yhi) = (grid.y0_mm - ey, grid.y_mm(grid.rows - 1) + ey);
-    check_exact_budget(path, grid, step, opts, (ex, ey))?;
-    // Deposit in blocks of at most EXACT_BLOCK sub-steps, so memory stays bounded whatever
-    // the path's length.
-    let g = *grid;
-    let zero = || Array2::<f64>::zeros((g.rows, g.cols));
-    let flush = |steps: &[(f64, f64, f64)], out: &mut Array2<f64>| {
-        let chunk = (steps.len() / (4 * rayon::current_num_threads()).max(1)).max(256);
-        let part = steps
-            .par_chunks(chunk)
-            .map(|c| {
-                let mut acc = zero();
-                for &(x, y, w) in c {
-                    deposit_one(
-                        &mut acc,
-                        &g,
-                        |dx, dy| field.rate_at_mm(dx, dy),
-                        x,
-                        y,
-                        w,
-                        ex,
-                        ey,
-                    );
-                }
-                acc
-            })
-            .reduce(zero, |a, b| a + b);
-        *out += &part;
-    };
-    let mut out = zero();
-    let mut steps: Vec<(f64, f64, f64)> = Vec::new();
-    path.for_each_substep(step, opts.max_dt_s, |x, y, dt, k, fr| {
-        if x >= xlo && x <= xhi && y >= ylo && y <= yhi {
-            steps.push((x, y, dt * weight_at(weights, k, fr)));
-            if steps.len() == EXACT_BLOCK {
-                flush(&steps, &mut out);
-                steps.clear();
-            }
+    crate::modulated::deposit_exact_modulated(path, field, grid, opts, |s| {
+        crate::modulated::Modulation {
+            rate: weight_at(weights, s.segment, s.fraction),
+            ..Default::default()
         }
-    });
-    if !steps.is_empty() {
-        flush(&steps, &mut out);
-    }
-    Ok(out)
+    })
 }
 
 /// The exact deposition's sub-step (mm): `opts.max_step_mm`, else a quarter pixel and 1/80 of
