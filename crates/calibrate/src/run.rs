@@ -7,10 +7,11 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::{Map, Value};
 
+use crate::band::{BandResidual, ProcessBand};
 use crate::effects::{candidates, Current};
 use crate::error::CalibrateError;
 use crate::model::{fit, Effect, Eval, Fit, Param, Problem};
-use crate::noise::initial_noise_floor;
+use crate::noise::{band_noise_floor, initial_noise_floor};
 use crate::refine::refine;
 use crate::selection::{base_gram, holdout, split, Score};
 use crate::unexplained::{self, Unexplained};
@@ -43,8 +44,12 @@ pub struct Baseline {
 
 #[derive(Debug, Clone, Serialize)]
 pub struct Final {
+    /// Full band, as the contract has it.
     pub residual_rms_nm: f64,
     pub residual_pv_nm: f64,
+    /// The residual per band: the process band (what the TIF passes, see `band`) and the
+    /// finer band, each with the noise floor's share of it.
+    pub bands: Vec<BandResidual>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -118,7 +123,14 @@ pub struct Calibration {
     pub baseline: Baseline,
     #[serde(rename = "final")]
     pub final_: Final,
+    /// White measurement noise of the measured removal (full band, nm RMS).
     pub noise_floor_rms_nm: f64,
+    /// The band (cycles/mm, along `noise_floor_axis`) of the one-sided PSD of the registered
+    /// `before - after` where the floor was read (see `noise`).
+    pub noise_floor_band_per_mm: [f64; 2],
+    pub noise_floor_axis: String,
+    /// The band the process can produce (radial cycles/mm below the cutoff).
+    pub process_band: ProcessBand,
     pub effects: Vec<EffectReport>,
     pub unexplained: Vec<Unexplained>,
     /// Strongly correlated parameters of different accepted effects (joint refit).
@@ -319,14 +331,14 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         ..Maps::default()
     };
     let sp = split(p);
+    let band = ProcessBand::of(&p.tif, &p.grid);
     // The floor the selection settles against (the maps not yet registered); reported below
     // from the registered removal.
-    let noise = initial_noise_floor(
-        &p.before,
-        &p.before_valid,
-        &ev.after_res,
-        &ev.after_res_valid,
-    );
+    let noise = floor_of(p, &band, &ev).0;
+    // Selection works in the process band: its share of the floor, and the residual with
+    // its fine-band part taken out (texture that does not resample identically would
+    // otherwise dominate every held-out sum of squares).
+    let noise_p = noise * band.process_share().sqrt();
     let mut rounds = Vec::new();
     let mut accepted: Vec<(String, f64, f64, Score)> = Vec::new(); // key, rms before, rms after, score
     let mut blocked: Vec<String> = Vec::new();
@@ -342,6 +354,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         if f.rms() <= trust {
             break;
         }
+        let (ev_sel, rms_p) = in_process_band(p, &band, &ev, &f);
         let cur = Current {
             p,
             ev: &ev,
@@ -355,10 +368,10 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         if trace {
             eprintln!("[{:?}] {} candidates built", t0.elapsed(), cands.len());
         }
-        let bg = base_gram(&ev, &sp);
+        let bg = base_gram(&ev_sel, &sp);
         let scores: Vec<Score> = cands
             .par_iter()
-            .map(|c| holdout(&ev, &c.extra, &sp, &bg))
+            .map(|c| holdout(&ev_sel, &c.extra, &sp, &bg))
             .collect();
         let mut round = Round {
             accepted: None,
@@ -449,9 +462,12 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             continue;
         }
         let pick = settle(
-            rms_before,
-            &refined.iter().map(|r| r.3.rms()).collect::<Vec<_>>(),
-            noise,
+            rms_p,
+            &refined
+                .iter()
+                .map(|r| in_process_band(p, &band, &r.2, &r.3).1)
+                .collect::<Vec<_>>(),
+            noise_p,
         );
         let (bi, trial, ev_t, f_t) = refined.swap_remove(pick);
         let cand = &cands[bi];
@@ -579,28 +595,72 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         }
     }
     // The floor of the measured removal at the final registration (texture cancels).
-    let noise = initial_noise_floor(
-        &p.before,
-        &p.before_valid,
-        &ev.after_res,
-        &ev.after_res_valid,
-    );
+    let (noise, floor_band, floor_axis) = floor_of(p, &band, &ev);
     let (rmap, rmask) = p.expand(&f.resid, &ev.w);
-    let unexplained = unexplained::find(&p.grid, &rmap, &rmask, noise, f.rms());
+    let bands = band.split(&p.grid, &rmap, &rmask, noise);
+    let unexplained = unexplained::find_by_band(&p.grid, &band, &rmap, &rmask, noise, &bands);
     maps.final_residual_nm = Some((rmap, rmask));
     Ok(Calibration {
         baseline,
         final_: Final {
             residual_rms_nm: f.rms(),
             residual_pv_nm: pv(&f, &ev.w),
+            bands,
         },
         noise_floor_rms_nm: noise,
+        noise_floor_band_per_mm: floor_band,
+        noise_floor_axis: floor_axis,
+        process_band: band,
         effects: reports,
         unexplained,
         correlations,
         rounds,
         maps,
     })
+}
+
+/// The noise floor of the measured removal at `ev`'s registration, with the band and axis it
+/// was read in: the band-aware floor (white level of the removal's PSD above the process band,
+/// see `noise`), else the pixel-scale estimate (`initial_noise_floor`, band up to Nyquist).
+fn floor_of(p: &Problem, band: &ProcessBand, ev: &Eval) -> (f64, [f64; 2], String) {
+    let (bv, av) = (&p.before_valid, &ev.after_res_valid);
+    if let Some(b) = band_noise_floor(&p.grid, band, &p.before, bv, &ev.after_res, av) {
+        return (b.rms_nm, b.band_per_mm, b.axis.to_string());
+    }
+    let n = initial_noise_floor(&p.before, bv, &ev.after_res, av);
+    let nyq = band.nyquist_per_mm[0].max(band.nyquist_per_mm[1]);
+    (n, [0.0, nyq], "fourth difference".into())
+}
+
+/// The selection's view of the current state: `ev` with the fine-band part of the current
+/// residual taken out of the measured removal (so held-out sums of squares are of the process
+/// band), and the process-band RMS of the residual.
+fn in_process_band(p: &Problem, band: &ProcessBand, ev: &Eval, f: &Fit) -> (Eval, f64) {
+    let (rmap, rmask) = p.expand(&f.resid, &ev.w);
+    let fine = band.fine_part(&p.grid, &rmap, &rmask);
+    let cols = p.grid.cols;
+    let m: Vec<f64> = p
+        .idx
+        .iter()
+        .zip(&ev.m)
+        .map(|(&k, v)| v - fine[(k / cols, k % cols)])
+        .collect();
+    let (mut ss, mut n) = (0.0, 0.0);
+    for ((&k, r), w) in p.idx.iter().zip(&f.resid).zip(&ev.w) {
+        if *w > 0.0 {
+            let low = r - fine[(k / cols, k % cols)];
+            ss += w * low * low;
+            n += w;
+        }
+    }
+    let sel = Eval {
+        names: ev.names.clone(),
+        cols: ev.cols.clone(),
+        means: ev.means.clone(),
+        m,
+        ..clone_eval_shell(ev)
+    };
+    (sel, (ss / f64::max(n, 1.0)).sqrt())
 }
 
 /// Model removal on the analysis pixels: the columns of `ev` weighted by the coefficients of
