@@ -335,10 +335,10 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     // The floor the selection settles against (the maps not yet registered); reported below
     // from the registered removal.
     let noise = floor_of(p, &band, &ev).0;
-    // Selection works in the process band: its share of the floor, and the residual with
-    // its fine-band part taken out (texture that does not resample identically would
-    // otherwise dominate every held-out sum of squares).
-    let noise_p = noise * band.process_share().sqrt();
+    // Selection scores the full-band residual (held-out sums of squares and the settle test):
+    // an effect's signal can sit partly in the fine band (a feed covariate at line ends and
+    // step-overs), so taking the fine band out before scoring hid it; the bands are reported
+    // on the final residual below.
     let mut rounds = Vec::new();
     let mut accepted: Vec<(String, f64, f64, Score)> = Vec::new(); // key, rms before, rms after, score
     let mut blocked: Vec<String> = Vec::new();
@@ -354,7 +354,6 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         if f.rms() <= trust {
             break;
         }
-        let (ev_sel, rms_p) = in_process_band(p, &band, &ev, &f);
         let cur = Current {
             p,
             ev: &ev,
@@ -368,10 +367,10 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         if trace {
             eprintln!("[{:?}] {} candidates built", t0.elapsed(), cands.len());
         }
-        let bg = base_gram(&ev_sel, &sp);
+        let bg = base_gram(&ev, &sp);
         let scores: Vec<Score> = cands
             .par_iter()
-            .map(|c| holdout(&ev_sel, &c.extra, &sp, &bg))
+            .map(|c| holdout(&ev, &c.extra, &sp, &bg))
             .collect();
         let mut round = Round {
             accepted: None,
@@ -462,12 +461,9 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             continue;
         }
         let pick = settle(
-            rms_p,
-            &refined
-                .iter()
-                .map(|r| in_process_band(p, &band, &r.2, &r.3).1)
-                .collect::<Vec<_>>(),
-            noise_p,
+            rms_before,
+            &refined.iter().map(|r| r.3.rms()).collect::<Vec<_>>(),
+            noise,
         );
         let (bi, trial, ev_t, f_t) = refined.swap_remove(pick);
         let cand = &cands[bi];
@@ -630,37 +626,6 @@ fn floor_of(p: &Problem, band: &ProcessBand, ev: &Eval) -> (f64, [f64; 2], Strin
     let n = initial_noise_floor(&p.before, bv, &ev.after_res, av);
     let nyq = band.nyquist_per_mm[0].max(band.nyquist_per_mm[1]);
     (n, [0.0, nyq], "fourth difference".into())
-}
-
-/// The selection's view of the current state: `ev` with the fine-band part of the current
-/// residual taken out of the measured removal (so held-out sums of squares are of the process
-/// band), and the process-band RMS of the residual.
-fn in_process_band(p: &Problem, band: &ProcessBand, ev: &Eval, f: &Fit) -> (Eval, f64) {
-    let (rmap, rmask) = p.expand(&f.resid, &ev.w);
-    let fine = band.fine_part(&p.grid, &rmap, &rmask);
-    let cols = p.grid.cols;
-    let m: Vec<f64> = p
-        .idx
-        .iter()
-        .zip(&ev.m)
-        .map(|(&k, v)| v - fine[(k / cols, k % cols)])
-        .collect();
-    let (mut ss, mut n) = (0.0, 0.0);
-    for ((&k, r), w) in p.idx.iter().zip(&f.resid).zip(&ev.w) {
-        if *w > 0.0 {
-            let low = r - fine[(k / cols, k % cols)];
-            ss += w * low * low;
-            n += w;
-        }
-    }
-    let sel = Eval {
-        names: ev.names.clone(),
-        cols: ev.cols.clone(),
-        means: ev.means.clone(),
-        m,
-        ..clone_eval_shell(ev)
-    };
-    (sel, (ss / f64::max(n, 1.0)).sqrt())
 }
 
 /// Model removal on the analysis pixels: the columns of `ev` weighted by the coefficients of

@@ -5,7 +5,7 @@
 //! is the generator's white noise (the two maps' in quadrature).
 //!
 //! The residual is split at the process band's cutoff (the TIF's |MTF| at 1e-2 of its value at
-//! 0): the process band, where effects are selected, and the fine band, whose excess above its
+//! 0): the process band, what the process can make, and the fine band, whose excess above its
 //! share of the floor is reported under `unexplained` with its band.
 
 use bonnetlab_calibrate::pipeline::problem_with_spot;
