@@ -87,7 +87,47 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
         String::new(),
     ]);
     page.table(&t);
-    page.note("Residual RMS over the common valid aperture after fitting piston and tilt (the measurement's set-up terms).");
+    page.note(&format!(
+        "Residual RMS over the common valid aperture after fitting piston and tilt (the measurement's set-up terms). \
+         Noise floor: the white level of the one-sided PSD of the registered before - after along {} at {} - {} 1/mm.",
+        cal.noise_floor_axis,
+        fixed(cal.noise_floor_band_per_mm[0], 3),
+        fixed(cal.noise_floor_band_per_mm[1], 3)
+    ));
+    page.section("Final residual per band");
+    let mut t = Table::new([
+        "band",
+        "radial frequency (1/mm)",
+        "residual RMS (nm)",
+        "noise floor in band (nm)",
+        "above floor (nm)",
+    ]);
+    for b in &cal.final_.bands {
+        t.row([
+            if b.band == "process" {
+                "process (the TIF passes it)".to_string()
+            } else {
+                "fine (the process cannot make it)".to_string()
+            },
+            format!(
+                "{} - {}",
+                fixed(b.band_per_mm[0], 3),
+                fixed(b.band_per_mm[1], 3)
+            ),
+            fixed(b.rms_nm, 4),
+            fixed(b.floor_nm, 4),
+            fixed((b.rms_nm.powi(2) - b.floor_nm.powi(2)).max(0.0).sqrt(), 4),
+        ]);
+    }
+    page.table(&t);
+    page.note(&format!(
+        "Process band: radial frequencies where the TIF's |MTF| is at least {} of its value at 0 \
+         (cutoff {} 1/mm, periods above {} mm); effects are selected and scored there. \
+         Bands from the areal split of the residual map (2-D DCT, brick-wall); they add up to the full-band RMS in power.",
+        cal.process_band.mtf_threshold,
+        fixed(cal.process_band.cutoff_per_mm, 3),
+        fixed(1.0 / cal.process_band.cutoff_per_mm.max(1e-12), 2)
+    ));
 
     page.section("Effects accepted (hold-out significant, in the order added)");
     if cal.effects.is_empty() {

@@ -9,6 +9,7 @@ pub mod path;
 pub mod tif;
 
 pub use error::CalibrateError;
+pub mod band;
 pub mod effects;
 pub mod lsq;
 pub mod model;

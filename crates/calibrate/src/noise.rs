@@ -19,6 +19,11 @@
 
 use ndarray::{Array2, Zip};
 
+use crate::band::ProcessBand;
+use crate::grid::MapGrid;
+use bonnetlab_spectrum::psd1d::{psd_x, psd_y, PsdOptions};
+use bonnetlab_surface::Surface;
+
 /// White-noise gain of the fourth difference.
 const GAIN: f64 = 70.0;
 /// Fewest five-pixel runs for an estimate along an axis.
@@ -84,6 +89,82 @@ pub fn initial_noise_floor(
         (Some(a), None) | (None, Some(a)) => a,
         (None, None) => 0.0,
     }
+}
+
+/// Where the band-aware floor starts, in multiples of the process band's cutoff (the TIF's
+/// |MTF| keeps falling beyond its 1e-2 point: little removal is left there).
+pub const FLOOR_BAND_START: f64 = 1.5;
+/// Fewest PSD bins a floor block averages.
+const FLOOR_BLOCK_BINS: usize = 8;
+
+/// A noise floor with the band it was read in.
+#[derive(Debug, Clone, Copy)]
+pub struct BandFloor {
+    /// White-noise RMS (nm) of the whole band up to Nyquist implied by the level read.
+    pub rms_nm: f64,
+    /// The PSD bins (cycles/mm) the level was read over.
+    pub band_per_mm: [f64; 2],
+    /// "x" or "y": the direction of the one-sided 1-D PSD.
+    pub axis: &'static str,
+}
+
+/// Band-aware noise floor of the measured removal `before - after` (after registered onto the
+/// before grid), on the pixels valid in both.
+///
+/// Above the process band the removal has no content, so the one-sided 1-D PSDs (X and Y, the
+/// spectrum crate's, Hann window, nm^2 mm) of the difference hold only the two maps' white
+/// noise (level `2 sigma^2 d`) and whatever texture the registration did not cancel. That
+/// texture is coloured: a residual misregistration leaves it where the texture is strong and
+/// a sub-pixel resampling of a surface sampled at points leaves it towards Nyquist, while the
+/// noise is flat. The floor is the lowest mean level over blocks of at least
+/// `FLOOR_BLOCK_BINS` bins between `FLOOR_BAND_START` times the cutoff and Nyquist, along
+/// either axis, and it is reported with that block's band. `None` when no such block exists
+/// (a TIF that passes almost everything the map resolves).
+pub fn band_noise_floor(
+    g: &MapGrid,
+    band: &ProcessBand,
+    before: &Array2<f64>,
+    bv: &Array2<bool>,
+    after: &Array2<f64>,
+    av: &Array2<bool>,
+) -> Option<BandFloor> {
+    let d = before - after;
+    let mut m = bv.clone();
+    Zip::from(&mut m).and(av).for_each(|a, &b| *a &= b);
+    let d = Array2::from_shape_fn(d.dim(), |ij| if m[ij] { d[ij] } else { 0.0 });
+    let s = Surface::with_mask(d, m, Some(g.dx_mm), Some(g.dy_mm)).ok()?;
+    let opts = PsdOptions::default();
+    let f_lo = FLOOR_BAND_START * band.cutoff_per_mm;
+    let mut best: Option<(f64, BandFloor)> = None;
+    for (axis, psd) in [("x", psd_x(&s, &opts)), ("y", psd_y(&s, &opts))] {
+        let Ok(p) = psd else { continue };
+        let Some(first) = p.freq_per_mm.iter().position(|f| *f >= f_lo) else {
+            continue;
+        };
+        let last = p.psd_nm2_mm.len();
+        if last < first + FLOOR_BLOCK_BINS {
+            continue;
+        }
+        let width = FLOOR_BLOCK_BINS.max((last - first) / 16);
+        let mut a = first;
+        while a + width <= last {
+            let level = p.psd_nm2_mm[a..a + width].iter().sum::<f64>() / width as f64;
+            let sigma = (level / (2.0 * p.spacing_mm)).sqrt();
+            if best.is_none_or(|(b, _)| sigma < b) {
+                let band_per_mm = [p.freq_per_mm[a], p.freq_per_mm[a + width - 1]];
+                best = Some((
+                    sigma,
+                    BandFloor {
+                        rms_nm: sigma,
+                        band_per_mm,
+                        axis,
+                    },
+                ));
+            }
+            a += width;
+        }
+    }
+    best.map(|b| b.1)
 }
 
 #[cfg(test)]

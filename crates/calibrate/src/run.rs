@@ -7,10 +7,11 @@ use rayon::prelude::*;
 use serde::Serialize;
 use serde_json::{Map, Value};
 
+use crate::band::{BandResidual, ProcessBand};
 use crate::effects::{candidates, Current};
 use crate::error::CalibrateError;
 use crate::model::{fit, Effect, Eval, Fit, Param, Problem};
-use crate::noise::initial_noise_floor;
+use crate::noise::{band_noise_floor, initial_noise_floor};
 use crate::refine::refine;
 use crate::selection::{base_gram, holdout, split, Score};
 use crate::unexplained::{self, Unexplained};
@@ -43,8 +44,12 @@ pub struct Baseline {
 
 #[derive(Debug, Clone, Serialize)]
 pub struct Final {
+    /// Full band, as the contract has it.
     pub residual_rms_nm: f64,
     pub residual_pv_nm: f64,
+    /// The residual per band: the process band (what the TIF passes, see `band`) and the
+    /// finer band, each with the noise floor's share of it.
+    pub bands: Vec<BandResidual>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -118,7 +123,14 @@ pub struct Calibration {
     pub baseline: Baseline,
     #[serde(rename = "final")]
     pub final_: Final,
+    /// White measurement noise of the measured removal (full band, nm RMS).
     pub noise_floor_rms_nm: f64,
+    /// The band (cycles/mm, along `noise_floor_axis`) of the one-sided PSD of the registered
+    /// `before - after` where the floor was read (see `noise`).
+    pub noise_floor_band_per_mm: [f64; 2],
+    pub noise_floor_axis: String,
+    /// The band the process can produce (radial cycles/mm below the cutoff).
+    pub process_band: ProcessBand,
     pub effects: Vec<EffectReport>,
     pub unexplained: Vec<Unexplained>,
     /// Strongly correlated parameters of different accepted effects (joint refit).
@@ -319,14 +331,14 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         ..Maps::default()
     };
     let sp = split(p);
+    let band = ProcessBand::of(&p.tif, &p.grid);
     // The floor the selection settles against (the maps not yet registered); reported below
     // from the registered removal.
-    let noise = initial_noise_floor(
-        &p.before,
-        &p.before_valid,
-        &ev.after_res,
-        &ev.after_res_valid,
-    );
+    let noise = floor_of(p, &band, &ev).0;
+    // Selection scores the full-band residual (held-out sums of squares and the settle test):
+    // an effect's signal can sit partly in the fine band (a feed covariate at line ends and
+    // step-overs), so taking the fine band out before scoring hid it; the bands are reported
+    // on the final residual below.
     let mut rounds = Vec::new();
     let mut accepted: Vec<(String, f64, f64, Score)> = Vec::new(); // key, rms before, rms after, score
     let mut blocked: Vec<String> = Vec::new();
@@ -579,28 +591,41 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         }
     }
     // The floor of the measured removal at the final registration (texture cancels).
-    let noise = initial_noise_floor(
-        &p.before,
-        &p.before_valid,
-        &ev.after_res,
-        &ev.after_res_valid,
-    );
+    let (noise, floor_band, floor_axis) = floor_of(p, &band, &ev);
     let (rmap, rmask) = p.expand(&f.resid, &ev.w);
-    let unexplained = unexplained::find(&p.grid, &rmap, &rmask, noise, f.rms());
+    let bands = band.split(&p.grid, &rmap, &rmask, noise);
+    let unexplained = unexplained::find_by_band(&p.grid, &band, &rmap, &rmask, noise, &bands);
     maps.final_residual_nm = Some((rmap, rmask));
     Ok(Calibration {
         baseline,
         final_: Final {
             residual_rms_nm: f.rms(),
             residual_pv_nm: pv(&f, &ev.w),
+            bands,
         },
         noise_floor_rms_nm: noise,
+        noise_floor_band_per_mm: floor_band,
+        noise_floor_axis: floor_axis,
+        process_band: band,
         effects: reports,
         unexplained,
         correlations,
         rounds,
         maps,
     })
+}
+
+/// The noise floor of the measured removal at `ev`'s registration, with the band and axis it
+/// was read in: the band-aware floor (white level of the removal's PSD above the process band,
+/// see `noise`), else the pixel-scale estimate (`initial_noise_floor`, band up to Nyquist).
+fn floor_of(p: &Problem, band: &ProcessBand, ev: &Eval) -> (f64, [f64; 2], String) {
+    let (bv, av) = (&p.before_valid, &ev.after_res_valid);
+    if let Some(b) = band_noise_floor(&p.grid, band, &p.before, bv, &ev.after_res, av) {
+        return (b.rms_nm, b.band_per_mm, b.axis.to_string());
+    }
+    let n = initial_noise_floor(&p.before, bv, &ev.after_res, av);
+    let nyq = band.nyquist_per_mm[0].max(band.nyquist_per_mm[1]);
+    (n, [0.0, nyq], "fourth difference".into())
 }
 
 /// Model removal on the analysis pixels: the columns of `ev` weighted by the coefficients of

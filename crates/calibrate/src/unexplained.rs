@@ -10,6 +10,7 @@
 use ndarray::Array2;
 use serde::Serialize;
 
+use crate::band::{BandResidual, ProcessBand};
 use crate::grid::{smooth_masked, MapGrid};
 use bonnetlab_spectrum::psd1d::{psd_x, psd_y, PsdOptions};
 use bonnetlab_surface::Surface;
@@ -75,14 +76,71 @@ fn region(g: &MapGrid, r: &Array2<f64>, valid: &Array2<bool>, f_hi: f64) -> ([f6
     )
 }
 
-/// Bands of unexplained structure in a residual map, given the noise floor (nm RMS).
-pub fn find(
+/// Unexplained structure band by band: the PSD bands above the noise (and a broadband entry
+/// when none stands out but the process band is above its floor) searched in the residual's
+/// process-band component, and one entry for the fine band's excess above its floor
+/// (structure the process cannot make: texture that does not resample identically, aliasing),
+/// located from the fine-band component. `bands` is the residual's split (`band::split`).
+pub fn find_by_band(
+    g: &MapGrid,
+    band: &ProcessBand,
+    r: &Array2<f64>,
+    valid: &Array2<bool>,
+    noise_rms_nm: f64,
+    bands: &[BandResidual],
+) -> Vec<Unexplained> {
+    let fine = band.fine_part(g, r, valid);
+    let low = r - &fine;
+    let process = bands.iter().find(|b| b.band == "process");
+    let mut out = match process {
+        Some(b) => find_in(
+            g,
+            &low,
+            valid,
+            noise_rms_nm,
+            (b.rms_nm, b.floor_nm, b.band_per_mm),
+        ),
+        None => Vec::new(),
+    };
+    if let Some(b) = bands.iter().find(|b| b.band == "fine") {
+        let excess = (b.rms_nm.powi(2) - b.floor_nm.powi(2)).max(0.0).sqrt();
+        if excess > 0.5 * b.floor_nm {
+            let [f1, f2] = b.band_per_mm;
+            let (bbox, share) = region(g, &fine, valid, f2);
+            out.push(Unexplained {
+                description: format!(
+                    "fine texture the process cannot make (resampling, texture): {excess:.3} nm RMS \
+                     above the noise floor at {f1:.3}-{f2:.3} /mm (periods below {:.2} mm, where \
+                     the TIF's |MTF| is under {}), strongest at x {:.1}-{:.1} mm, y {:.1}-{:.1} mm ({})",
+                    1.0 / f1.max(1e-12),
+                    band.mtf_threshold,
+                    bbox[0],
+                    bbox[1],
+                    bbox[2],
+                    bbox[3],
+                    if share < 0.3 { "local" } else { "widespread" }
+                ),
+                band_per_mm: [f1, f2],
+                rms_nm: excess,
+                direction: "both".into(),
+                region_mm: bbox,
+            });
+        }
+    }
+    out.sort_by(|a, b| b.rms_nm.total_cmp(&a.rms_nm));
+    out
+}
+
+/// Bands of unexplained structure in a residual map, given the noise floor (nm RMS, full
+/// band) and the map's RMS, its floor and its band `total` (the broadband fallback's test).
+fn find_in(
     g: &MapGrid,
     r: &Array2<f64>,
     valid: &Array2<bool>,
     noise_rms_nm: f64,
-    total_rms_nm: f64,
+    total: (f64, f64, [f64; 2]),
 ) -> Vec<Unexplained> {
+    let (total_rms_nm, total_floor_nm, total_band) = total;
     let mut out = Vec::new();
     // The project's one 1-D PSD (one-sided, nm^2 mm; per-segment mean removed, the spectrum
     // crate's dropout and segment rules); the residual already has its piston and tilt fitted.
@@ -166,21 +224,24 @@ pub fn find(
     }
     out.sort_by(|a, b| b.rms_nm.total_cmp(&a.rms_nm));
     out.truncate(4);
-    let excess_total = (total_rms_nm.powi(2) - noise_rms_nm.powi(2))
+    let excess_total = (total_rms_nm.powi(2) - total_floor_nm.powi(2))
         .max(0.0)
         .sqrt();
-    if out.is_empty() && excess_total > 0.5 * noise_rms_nm {
+    // A fraction of the full floor (not of the band's share, which can be a hundredth of it).
+    if out.is_empty() && excess_total > 0.5 * noise_rms_nm.max(total_floor_nm) {
         let (bbox, share) = region(g, r, valid, 0.5 / g.dx_mm.max(g.dy_mm));
         out.push(Unexplained {
             description: format!(
-                "broadband residual {excess_total:.3} nm RMS above the noise floor, strongest at x {:.1}-{:.1} mm, y {:.1}-{:.1} mm ({})",
+                "broadband residual {excess_total:.3} nm RMS above the noise floor at {:.3}-{:.3} /mm, strongest at x {:.1}-{:.1} mm, y {:.1}-{:.1} mm ({})",
+                total_band[0],
+                total_band[1],
                 bbox[0],
                 bbox[1],
                 bbox[2],
                 bbox[3],
                 if share < 0.3 { "local" } else { "widespread" }
             ),
-            band_per_mm: [0.0, 0.5 / g.dx_mm.min(g.dy_mm)],
+            band_per_mm: total_band,
             rms_nm: excess_total,
             direction: "both".into(),
             region_mm: bbox,
