@@ -193,12 +193,12 @@ pub fn tif_on_grid(tif: &Tif, grid: &Grid) -> Result<Tif, ProcessError> {
 /// Calls `f(u, v, w, dt, shares)` for every sub-step (at most half a pixel) of `path` on
 /// `grid`: fractional row / column, dwell (s, times the rate weight), the path's own dwell (s,
 /// no weight) and its shares `[resting, along X, along Y]` (oblique motion split by cos^2 /
-/// sin^2 of its direction).
+/// sin^2 of its direction), then the path segment `k` and the fraction along it.
 fn for_each_motion_substep(
     path: &PathLog,
     weights: Option<&[f64]>,
     grid: &Grid,
-    mut f: impl FnMut(f64, f64, f64, f64, [f64; 3]),
+    mut f: impl FnMut(f64, f64, f64, f64, [f64; 3], usize, f64),
 ) {
     let step = 0.5 * grid.dx_mm.min(grid.dy_mm);
     // A segment shorter than this is a resting tool (well below any sub-pixel structure).
@@ -214,7 +214,7 @@ fn for_each_motion_substep(
         } else {
             [0.0, ddx * ddx / len2, ddy * ddy / len2]
         };
-        f(u, v, w, dt, shares);
+        f(u, v, w, dt, shares, k, fr);
     });
 }
 
@@ -229,7 +229,7 @@ pub fn dwell_maps_by_motion(
 ) -> Result<[Option<Array2<f64>>; 3], ProcessError> {
     check_weights(path, weights)?;
     let mut maps: [Option<Array2<f64>>; 3] = [None, None, None];
-    for_each_motion_substep(path, weights, grid, |u, v, w, _, shares| {
+    for_each_motion_substep(path, weights, grid, |u, v, w, _, shares, _, _| {
         for (m, share) in maps.iter_mut().zip(shares) {
             if share > 0.0 {
                 let d = m.get_or_insert_with(|| Array2::zeros((grid.rows, grid.cols)));
@@ -445,8 +445,15 @@ pub struct FastRemoval {
     calls: u64,
     /// Phase kernels built so far.
     phase_builds: usize,
-    /// The current path's sub-steps (reused buffer: the path is walked once per call).
+    /// The current call's weighted sub-steps (reused buffer).
     steps: Vec<SubStep>,
+    /// The last path walked (its own copy), whose unweighted walk is kept in `walk`.
+    walked: Option<PathLog>,
+    /// Sub-steps of `walked` with `w = dt` (no rate weight), and each one's path segment and
+    /// fraction along it: a call with the same path and other weights re-applies only the
+    /// weights (the calibration asks for one executed path with many rate terms).
+    walk: Vec<SubStep>,
+    walk_at: Vec<(usize, f64)>,
     /// Zeroed dwell maps of the grown grid, for reuse.
     pool: Vec<Array2<f64>>,
 }
@@ -515,6 +522,9 @@ impl FastRemoval {
             calls: 0,
             phase_builds: 0,
             steps: Vec::new(),
+            walked: None,
+            walk: Vec::new(),
+            walk_at: Vec::new(),
             pool: Vec::new(),
         })
     }
@@ -642,10 +652,40 @@ impl FastRemoval {
         weights: Option<&[f64]>,
     ) -> Result<Array2<f64>, ProcessError> {
         check_weights(path, weights)?;
-        // The path is walked once; its sub-steps are kept for the line phases and the splat.
-        let mut steps = std::mem::take(&mut self.steps);
+        if self.walked.as_ref() != Some(path) {
+            self.walk_path(path);
+        }
+        let walk = std::mem::take(&mut self.walk);
+        let out = match weights {
+            // The walk's own dwell is `dt` times a unit weight.
+            None => self.removal_of_steps(&walk),
+            Some(_) => {
+                let mut steps = std::mem::take(&mut self.steps);
+                steps.clear();
+                steps.extend(
+                    walk.iter()
+                        .zip(&self.walk_at)
+                        .map(|(st, &(k, fr))| SubStep {
+                            w: st.dt * weight_at(weights, k, fr),
+                            ..*st
+                        }),
+                );
+                let out = self.removal_of_steps(&steps);
+                self.steps = steps;
+                out
+            }
+        };
+        self.walk = walk;
+        out
+    }
+
+    /// Walks `path` on the grown grid into `walk` / `walk_at` (unweighted) and keeps a copy.
+    fn walk_path(&mut self, path: &PathLog) {
+        let (steps, at) = (&mut self.walk, &mut self.walk_at);
         steps.clear();
-        for_each_motion_substep(path, weights, &self.ext, |u, v, w, dt, mut shares| {
+        at.clear();
+        for_each_motion_substep(path, None, &self.ext, |u, v, w, dt, mut shares, k, fr| {
+            at.push((k, fr));
             // A motion's minor share (a logged line's jitter across it, a step-over's drift
             // along the lines) goes with the major motion: its kernel and line phase.
             if shares[1] > 0.0 && shares[2] > 0.0 {
@@ -663,9 +703,7 @@ impl FastRemoval {
                 shares,
             })
         });
-        let out = self.removal_of_steps(&steps);
-        self.steps = steps;
-        out
+        self.walked = Some(path.clone());
     }
 
     fn removal_of_steps(&mut self, steps: &[SubStep]) -> Result<Array2<f64>, ProcessError> {
@@ -1088,6 +1126,45 @@ mod tests {
         }
         assert!(builds[0] > 5, "{builds:?}");
         assert_eq!(builds[0], builds[2], "{builds:?}");
+    }
+
+    #[test]
+    fn a_kept_walk_takes_new_weights_and_a_moved_path_is_walked_again() {
+        // One workspace asked for a path with weights, without, with other weights, then for
+        // the same path moved by 0.3 mm (same sample count and times): every answer is the one
+        // a fresh workspace (which walks the path itself) gives, to the bit.
+        let grid = Grid::new(40, 50, 0.5, 0.5, 0.0, 0.0).unwrap();
+        let g = GaussianTif::new(2.0, 12.0, 3.0).unwrap();
+        let lim = crate::path::kinematics::Limits::default();
+        let dgrid = grid.grown(16, 16);
+        let dens = Array2::from_elem((dgrid.rows, dgrid.cols), 0.3);
+        let r = RasterSpec::over_rect((-6.0, 31.0), (-6.0, 26.0), 1.7, 2.0);
+        let p = crate::path::kinematics::dwell_raster(&r, &dens, &dgrid, &lim, 0.2)
+            .unwrap()
+            .0;
+        let n = p.len();
+        let g1: Vec<f64> = (0..n)
+            .map(|k| 1.0 + 0.3 * (k as f64 * 0.01).sin())
+            .collect();
+        let g2: Vec<f64> = (0..n).map(|k| k as f64 / n as f64 - 0.5).collect();
+        let mut moved = p.clone();
+        moved.x_mm.iter_mut().for_each(|x| *x += 0.3);
+        let mut fast = FastRemoval::from_field(&g, &grid).unwrap();
+        for (path, w) in [
+            (&p, Some(&g1[..])),
+            (&p, None),
+            (&p, Some(&g2[..])),
+            (&moved, Some(&g2[..])),
+            (&p, Some(&g1[..])),
+        ] {
+            let got = fast.removal(path, w).unwrap();
+            let want = FastRemoval::from_field(&g, &grid)
+                .unwrap()
+                .removal(path, w)
+                .unwrap();
+            assert!(want.iter().any(|v| v.abs() > 1e-3));
+            assert_eq!(got, want);
+        }
     }
 
     #[test]
