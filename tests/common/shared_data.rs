@@ -80,33 +80,33 @@ pub fn data_file(sub: &str, name: &str) -> PathBuf {
     p
 }
 
-/// The Chromium binary, if any.
-pub fn locate_chromium() -> Option<PathBuf> {
+/// The Chromium binary, or why there is none (a variable naming a missing file is named).
+pub fn locate_chromium() -> Result<PathBuf, String> {
     if let Some(p) = std::env::var_os(CHROMIUM_ENV) {
-        return Some(PathBuf::from(p)).filter(|p| p.is_file());
+        let p = PathBuf::from(p);
+        return if p.is_file() {
+            Ok(p)
+        } else {
+            Err(format!("{CHROMIUM_ENV}={} is not a file", p.display()))
+        };
     }
-    let path = std::env::var_os("PATH")?;
-    for dir in std::env::split_paths(&path) {
-        for n in [
-            "chromium",
-            "chromium-browser",
-            "google-chrome",
-            "google-chrome-stable",
-        ] {
-            let p = dir.join(n);
-            if p.is_file() {
-                return Some(p);
-            }
-        }
-    }
-    None
+    let names = [
+        "chromium",
+        "chromium-browser",
+        "google-chrome",
+        "google-chrome-stable",
+    ];
+    std::env::split_paths(&std::env::var_os("PATH").unwrap_or_default())
+        .flat_map(|dir| names.map(|n| dir.join(n)))
+        .find(|p| p.is_file())
+        .ok_or_else(|| format!("no {} on PATH", names.join(" / ")))
 }
 
 /// The Chromium binary; panics with what to do when there is none.
 pub fn chromium() -> PathBuf {
-    locate_chromium().unwrap_or_else(|| {
+    locate_chromium().unwrap_or_else(|why| {
         panic!(
-            "this test needs headless Chromium: install Debian's `chromium` \
+            "this test needs headless Chromium ({why}): install Debian's `chromium` \
              (apt-get install chromium) or set {CHROMIUM_ENV}=/path/to/chromium"
         )
     })
@@ -139,14 +139,14 @@ pub fn gate() {
         return;
     }
     match locate_chromium() {
-        Some(p) => println!("cargo::rerun-if-changed={}", p.display()),
-        None if ci => {
-            println!("cargo::warning=CI=true and no chromium on PATH: the browser test will fail")
+        Ok(p) => println!("cargo::rerun-if-changed={}", p.display()),
+        Err(why) if ci => {
+            println!("cargo::warning=CI=true and {why}: the browser test will fail")
         }
-        None => {
+        Err(why) => {
             println!("cargo::rustc-cfg=no_chromium");
             println!(
-                "cargo::warning=NOT RUN: the browser report test (no chromium on PATH); \
+                "cargo::warning=NOT RUN: the browser report test ({why}); \
                  apt-get install chromium or set {CHROMIUM_ENV}, then rebuild."
             );
         }
