@@ -111,14 +111,10 @@ pub fn find_by_band(
                 description: format!(
                     "fine texture the process cannot make (resampling, texture): {excess:.3} nm RMS \
                      above the noise floor at {f1:.3}-{f2:.3} /mm (periods below {:.2} mm, where \
-                     the TIF's |MTF| is under {}), strongest at x {:.1}-{:.1} mm, y {:.1}-{:.1} mm ({})",
+                     the TIF's |MTF| is under {}), {}",
                     1.0 / f1.max(1e-12),
                     band.mtf_threshold,
-                    bbox[0],
-                    bbox[1],
-                    bbox[2],
-                    bbox[3],
-                    if share < 0.3 { "local" } else { "widespread" }
+                    located(bbox, share)
                 ),
                 band_per_mm: [f1, f2],
                 rms_nm: excess,
@@ -201,15 +197,11 @@ fn find_in(
                     out.push(Unexplained {
                         description: format!(
                             "structure varying along {dir} at {f1:.4}-{f2:.4} /mm (periods {}-{} mm), {} nm RMS above the noise, \
-                             strongest at x {:.1}-{:.1} mm, y {:.1}-{:.1} mm ({})",
+                             {}",
                             per(f2),
                             per(f1),
                             format_args!("{rms:.3}"),
-                            bbox[0],
-                            bbox[1],
-                            bbox[2],
-                            bbox[3],
-                            if share < 0.3 { "local" } else { "widespread" }
+                            located(bbox, share)
                         ),
                         band_per_mm: [f1, f2],
                         rms_nm: rms,
@@ -232,14 +224,10 @@ fn find_in(
         let (bbox, share) = region(g, r, valid, 0.5 / g.dx_mm.max(g.dy_mm));
         out.push(Unexplained {
             description: format!(
-                "broadband residual {excess_total:.3} nm RMS above the noise floor at {:.3}-{:.3} /mm, strongest at x {:.1}-{:.1} mm, y {:.1}-{:.1} mm ({})",
+                "broadband residual {excess_total:.3} nm RMS above the noise floor at {:.3}-{:.3} /mm, {}",
                 total_band[0],
                 total_band[1],
-                bbox[0],
-                bbox[1],
-                bbox[2],
-                bbox[3],
-                if share < 0.3 { "local" } else { "widespread" }
+                located(bbox, share)
             ),
             band_per_mm: total_band,
             rms_nm: excess_total,
@@ -248,4 +236,17 @@ fn find_in(
         });
     }
     out
+}
+
+/// Where a structure sits: its bounding box (x0, x1, y0, y1 in mm) and whether it is local
+/// (under 30 % of the valid area) or widespread.
+fn located(bbox: [f64; 4], share: f64) -> String {
+    format!(
+        "strongest at x {:.1}-{:.1} mm, y {:.1}-{:.1} mm ({})",
+        bbox[0],
+        bbox[1],
+        bbox[2],
+        bbox[3],
+        if share < 0.3 { "local" } else { "widespread" }
+    )
 }
