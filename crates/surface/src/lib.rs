@@ -13,6 +13,7 @@ pub mod fill;
 pub mod form;
 pub mod format;
 pub mod grid;
+pub mod lm;
 pub mod lsq;
 pub mod pvr;
 pub mod rng;
