@@ -3,7 +3,8 @@
 //! Data per spot: peak rate, volumetric rate, FWHM X and FWHM Y. Residuals are logarithmic
 //! (ln(model / measured)), so every metric counts by its relative error whatever its unit.
 //! Parameters are fitted in log space (they stay positive) by Levenberg-Marquardt with a
-//! forward-difference Jacobian; each damped step and the covariance are solved by nalgebra's LU.
+//! forward-difference Jacobian (the project's one driver, `bonnetlab_surface::lm`); the covariance
+//! is inverted by nalgebra's LU.
 //!
 //! Identifiability: the bonnet radius `R` always shows in the spot width (a = sqrt(2Rh - h^2)).
 //! The Preston coefficient `k` and the effective modulus `E` enter the rate as
@@ -11,7 +12,8 @@
 //! varies across the spots; otherwise `E` is held at its starting value and only `k R`-type
 //! combinations are fitted (reported in `held`). The pressure exponent is never fitted.
 
-use nalgebra::{DMatrix, DVector, LU};
+use bonnetlab_surface::lm::{self, LmProblem, LmSettings};
+use nalgebra::{DMatrix, LU};
 use serde::{Deserialize, Serialize};
 
 use crate::error::SpotsError;
@@ -133,50 +135,22 @@ pub fn fit_model(obs: &[Observation], start: &FitStart) -> Result<ModelFit, Spot
     // Better start: the width fixes R, then the mean rate ratio fixes k.
     q = initial_guess(q, obs, &build)?;
 
-    let cost = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
-    let mut r = residuals(&build(&q), obs)?;
-    let mut c = cost(&r);
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    let mut jac = jacobian(&q, &r, obs, &build)?;
-    for it in 0..200 {
-        iterations = it + 1;
-        let (jtj, jtr) = normal(&jac, &r, np);
-        let mut improved = false;
-        for _ in 0..30 {
-            let mut a = jtj.clone();
-            for k in 0..np {
-                a[k * np + k] += lambda * jtj[k * np + k].max(1e-12);
-            }
-            let rhs: Vec<f64> = jtr.iter().map(|v| -v).collect();
-            let Some(step) = solve(&a, &rhs, np) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let trial: Vec<f64> = q
-                .iter()
-                .zip(&step)
-                .map(|(a, b)| a + b.clamp(-1.0, 1.0))
-                .collect();
-            match residuals(&build(&trial), obs) {
-                Ok(rt) if cost(&rt) < c => {
-                    let small = step.iter().all(|s| s.abs() < 1e-10);
-                    let gain = c - cost(&rt);
-                    q = trial;
-                    r = rt;
-                    c = cost(&r);
-                    lambda = (lambda * 0.3).max(1e-12);
-                    improved = !(small || gain < 1e-15 * c.max(1e-300));
-                    break;
-                }
-                _ => lambda *= 10.0,
-            }
-        }
-        if !improved {
-            break;
-        }
-        jac = jacobian(&q, &r, obs, &build)?;
-    }
+    let r0 = residuals(&build(&q), obs)?;
+    let mut problem = SpotProblem { obs, build: &build };
+    let settings = LmSettings {
+        max_iter: 200,
+        max_tries: 30,
+        lambda0: 1e-3,
+        increase: 10.0,
+        decrease: 1.0 / 0.3,
+        lambda_min: 1e-12,
+        rel_tol: 1e-15,
+        step_tol: 1e-10,
+        diag_floor: 1e-12,
+    };
+    let out = lm::minimize(&mut problem, q, r0, &settings)?;
+    let (q, r, c, iterations) = (out.x, out.state, out.cost, out.iterations);
+    let jac = problem.jacobian(&q, &r)?;
     let n = r.len();
     let dof = n.saturating_sub(np).max(1) as f64;
     let s2 = c / dof;
@@ -196,6 +170,38 @@ pub fn fit_model(obs: &[Observation], start: &FitStart) -> Result<ModelFit, Spot
         n_spots: obs.len(),
         iterations,
     })
+}
+
+/// The fit as the project's one Levenberg-Marquardt driver sees it: log parameters, log
+/// residuals, steps clamped to a factor e per iteration.
+struct SpotProblem<'a, 'o, F: Fn(&[f64]) -> BonnetModel> {
+    obs: &'a [Observation<'o>],
+    build: &'a F,
+}
+
+impl<F: Fn(&[f64]) -> BonnetModel> LmProblem for SpotProblem<'_, '_, F> {
+    type State = Vec<f64>;
+    type Error = SpotsError;
+
+    fn residual<'s>(&self, state: &'s Vec<f64>) -> &'s [f64] {
+        state
+    }
+
+    fn jacobian(&mut self, q: &[f64], r: &Vec<f64>) -> Result<Vec<Vec<f64>>, SpotsError> {
+        jacobian(q, r, self.obs, self.build)
+    }
+
+    fn propose(&self, q: &[f64], step: &[f64]) -> Vec<f64> {
+        q.iter()
+            .zip(step)
+            .map(|(a, b)| a + b.clamp(-1.0, 1.0))
+            .collect()
+    }
+
+    fn evaluate(&mut self, q: &[f64]) -> Result<Option<Vec<f64>>, SpotsError> {
+        // A trial the model cannot evaluate is a rejected trial, not a failed fit.
+        Ok(residuals(&(self.build)(q), self.obs).ok())
+    }
 }
 
 fn initial_guess(
@@ -269,14 +275,6 @@ fn lu_checked(a: &[f64], n: usize) -> Option<LU<f64, nalgebra::Dyn, nalgebra::Dy
     (!tiny).then_some(lu)
 }
 
-/// Solves `a x = b` (row-major n x n).
-fn solve(a: &[f64], b: &[f64], n: usize) -> Option<Vec<f64>> {
-    let x = lu_checked(a, n)?.solve(&DVector::from_column_slice(b))?;
-    x.iter()
-        .all(|v| v.is_finite())
-        .then(|| x.as_slice().to_vec())
-}
-
 /// The inverse of the row-major n x n matrix `a`, row-major.
 fn invert(a: &[f64], n: usize) -> Option<Vec<f64>> {
     let inv = lu_checked(a, n)?.try_inverse()?;
@@ -290,16 +288,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn solves_a_permuted_system_inverts_and_rejects_singular() {
+    fn inverts_a_permuted_system_and_rejects_singular() {
         let a = [0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
-        let x = [1.5, -2.0, 0.25];
-        let b: Vec<f64> = (0..3)
-            .map(|r| (0..3).map(|c| a[r * 3 + c] * x[c]).sum())
-            .collect();
-        let got = solve(&a, &b, 3).unwrap();
-        for k in 0..3 {
-            assert!((got[k] - x[k]).abs() < 1e-12);
-        }
         let inv = invert(&a, 3).unwrap();
         for r in 0..3 {
             for c in 0..3 {
@@ -307,7 +297,7 @@ mod tests {
                 assert!((v - f64::from(u8::from(r == c))).abs() < 1e-12);
             }
         }
-        assert!(solve(&[1.0, 2.0, 2.0, 4.0], &[1.0, 2.0], 2).is_none());
+        assert!(invert(&[1.0, 2.0, 2.0, 4.0], 2).is_none());
         assert!(invert(&[1.0, 2.0, 2.0, 4.0 + 1e-16], 2).is_none());
     }
 }
