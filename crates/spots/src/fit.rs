@@ -198,7 +198,7 @@ impl<F: Fn(&[f64]) -> BonnetModel> LmProblem for SpotProblem<'_, '_, F> {
             .collect()
     }
 
-    fn evaluate(&mut self, q: &[f64]) -> Result<Option<Vec<f64>>, SpotsError> {
+    fn evaluate(&mut self, q: &[f64], _: &Vec<f64>) -> Result<Option<Vec<f64>>, SpotsError> {
         // A trial the model cannot evaluate is a rejected trial, not a failed fit.
         Ok(residuals(&(self.build)(q), self.obs).ok())
     }

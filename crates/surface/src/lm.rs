@@ -82,8 +82,13 @@ pub trait LmProblem {
     }
 
     /// Evaluates a trial point; `Ok(None)` when the model cannot be evaluated there (the trial
-    /// counts as rejected).
-    fn evaluate(&mut self, x: &[f64]) -> Result<Option<Self::State>, Self::Error>;
+    /// counts as rejected). `current` is the evaluation at the point the step starts from, for
+    /// problems that reuse parts of it.
+    fn evaluate(
+        &mut self,
+        x: &[f64],
+        current: &Self::State,
+    ) -> Result<Option<Self::State>, Self::Error>;
 }
 
 /// Where the driver stopped.
@@ -161,7 +166,7 @@ pub fn minimize<P: LmProblem>(
             let step = solve_from_r(&damped.finish(), p).coefficients;
             if step.iter().all(|v| v.is_finite()) {
                 let trial = problem.propose(&x, &step);
-                if let Some(st) = problem.evaluate(&trial)? {
+                if let Some(st) = problem.evaluate(&trial, &state)? {
                     let c = problem.cost(&st);
                     if c.is_finite() && c < cost {
                         let rel = (cost - c) / cost.max(f64::MIN_POSITIVE);
@@ -210,7 +215,7 @@ mod tests {
         fn jacobian(&mut self, x: &[f64], _: &Vec<f64>) -> Result<Vec<Vec<f64>>, ()> {
             Ok(vec![vec![-20.0 * x[0], -1.0], vec![10.0, 0.0]])
         }
-        fn evaluate(&mut self, x: &[f64]) -> Result<Option<Vec<f64>>, ()> {
+        fn evaluate(&mut self, x: &[f64], _: &Vec<f64>) -> Result<Option<Vec<f64>>, ()> {
             Ok(Some(vec![10.0 * (x[1] - x[0] * x[0]), 1.0 - x[0]]))
         }
     }
@@ -218,7 +223,7 @@ mod tests {
     #[test]
     fn finds_the_rosenbrock_minimum_from_the_classic_start() {
         let x0 = vec![-1.2, 1.0];
-        let s0 = Rosenbrock.evaluate(&x0).unwrap().unwrap();
+        let s0 = Rosenbrock.evaluate(&x0, &vec![]).unwrap().unwrap();
         let o = minimize(&mut Rosenbrock, x0, s0, &LmSettings::default()).unwrap();
         assert!(
             (o.x[0] - 1.0).abs() < 1e-9 && (o.x[1] - 1.0).abs() < 1e-9,
@@ -245,7 +250,7 @@ mod tests {
                 .map(|k| {
                     let mut q = x.to_vec();
                     q[k] += 1e-7;
-                    let rk = self.evaluate(&q)?.ok_or("outside")?;
+                    let rk = self.evaluate(&q, s)?.ok_or("outside")?;
                     Ok(rk.iter().zip(s).map(|(a, b)| (a - b) / 1e-7).collect())
                 })
                 .collect()
@@ -253,7 +258,7 @@ mod tests {
         fn propose(&self, x: &[f64], step: &[f64]) -> Vec<f64> {
             vec![x[0] + step[0], (x[1] + step[1]).max(1e-3)]
         }
-        fn evaluate(&mut self, x: &[f64]) -> Result<Option<Vec<f64>>, String> {
+        fn evaluate(&mut self, x: &[f64], _: &Vec<f64>) -> Result<Option<Vec<f64>>, String> {
             if x[1] > 50.0 {
                 return Ok(None);
             }
@@ -278,7 +283,7 @@ mod tests {
             .collect();
         let mut p = Decay { t, y };
         let x0 = vec![1.0, 2.0];
-        let s0 = p.evaluate(&x0).unwrap().unwrap();
+        let s0 = p.evaluate(&x0, &vec![]).unwrap().unwrap();
         let o = minimize(&mut p, x0, s0, &LmSettings::default()).unwrap();
         assert!(o.converged);
         // At the optimum the gradient J^T r vanishes (to the finite differences' accuracy).
@@ -298,7 +303,7 @@ mod tests {
     fn no_parameters_and_no_lower_cost_end_without_moving() {
         let mut p = Rosenbrock;
         let x0 = vec![1.0, 1.0];
-        let s0 = p.evaluate(&x0).unwrap().unwrap();
+        let s0 = p.evaluate(&x0, &vec![]).unwrap().unwrap();
         let o = minimize(&mut p, x0.clone(), s0, &LmSettings::default()).unwrap();
         assert_eq!(o.x, x0);
         assert_eq!(o.iterations, 1);
