@@ -35,7 +35,6 @@ use std::time::Instant;
 
 use bonnetlab::calibrate::pipeline::problem_with_spot;
 use bonnetlab::calibrate::run::{calibrate, Calibration, Options};
-use bonnetlab::calibrate::synth::true_tif::TrueTif;
 use bonnetlab::calibrate::synth::{
     generate, InitialSurface, Injected, SynthConfig, Waveform, WiggleCoord,
 };
@@ -156,10 +155,7 @@ fn scenario(args: &Args, r: usize, reals: &[PathBuf]) -> SynthConfig {
             texture_rms_nm: 10.0,
         }
     } else {
-        InitialSurface::PowerLaw {
-            exponent: 1.8 + 0.8 * rng.uniform(),
-            rms_nm: 140.0,
-        }
+        InitialSurface::realistic_texture(1.8 + 0.8 * rng.uniform())
     };
     let noise_b = 0.5 + 1.5 * rng.uniform();
     let noise_a = 0.5 + 1.5 * rng.uniform();
@@ -170,31 +166,13 @@ fn scenario(args: &Args, r: usize, reals: &[PathBuf]) -> SynthConfig {
     );
     let discs = 2 + rng.below(4);
     SynthConfig {
-        seed: mix(args.seed, 2, r as u64),
-        rows: n,
-        cols: n,
-        pixel_mm: d,
-        surface,
-        truth_oversample: 2,
-        tif: TrueTif::bonnet(800.0),
         pitch_mm: pitch,
-        feed_min_mm_per_s: 2.0,
-        feed_max_mm_per_s: 12.0,
-        sample_hz: 10.0,
         deposit_step_mm: (0.25 * d).min(0.06),
-        spot_dwell_s: 20.0,
-        spot_noise_nm: 0.5,
-        spot_pixel_mm: None,
         spot_offset_mm: off,
-        noise_nm: noise_b,
-        noise_after_nm: Some(noise_a),
-        dropout_fraction: 0.001,
         dropout_discs: discs,
-        dropout_disc_radius_mm: (0.5, 2.0),
-        setup_tilt_nm: 15.0,
-        setup_piston_nm: 7.0,
-        aperture_diameter_mm: if r % 2 == 1 { Some(90.0) } else { None },
-        effects: Vec::new(),
+        ..SynthConfig::realistic(mix(args.seed, 2, r as u64), n, 100.0, surface)
+            .with_noise_nm(noise_b, noise_a)
+            .with_round_aperture(r % 2 == 1, 90.0)
     }
 }
 

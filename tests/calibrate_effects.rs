@@ -64,18 +64,14 @@ fn finds_registration() {
 /// pitch absorbed).
 #[test]
 fn registration_is_unbiased_on_fine_pixels() {
+    // The reference large run's 400 x 400 map without its rate drift.
     let cfg = SynthConfig {
-        rows: 400,
-        cols: 400,
-        pixel_mm: 0.25,
-        deposit_step_mm: 0.2,
-        seed: 5,
         effects: vec![Injected::Registration {
             dx_mm: 0.2,
             dy_mm: -0.15,
             rotation_deg: 0.05,
         }],
-        ..SynthConfig::default()
+        ..SynthConfig::reference_large_run(400)
     };
     let c = run_cfg(&cfg);
     assert_eq!(c.effects.len(), 1, "{}", summary(&c));

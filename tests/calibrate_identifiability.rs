@@ -13,41 +13,22 @@ use bonnetlab::calibrate::effects::direction_lag::DirectionLag;
 use bonnetlab::calibrate::effects::periodic_path_error::{Coord, PeriodicPathError};
 use bonnetlab::calibrate::model::{Effect, Linear};
 use bonnetlab::calibrate::pipeline::problem_with_spot;
-use bonnetlab::calibrate::synth::true_tif::TrueTif;
 use bonnetlab::calibrate::synth::{generate, InitialSurface, Injected, SynthConfig};
 use common::calibrate::{param, run_cfg, summary};
 
-/// A realistic 100 mm run on a 200 x 200 map (0.5 mm pixels).
+/// A realistic 100 mm run on a 200 x 200 map (0.5 mm pixels), 1.0 / 1.4 nm noise, 3 dropout
+/// discs, the spot 0.2, -0.15 mm off centre.
 fn realistic(seed: u64, round: bool, pitch_mm: f64, exponent: f64) -> SynthConfig {
     SynthConfig {
-        seed,
-        rows: 200,
-        cols: 200,
-        pixel_mm: 0.5,
-        surface: InitialSurface::PowerLaw {
-            exponent,
-            rms_nm: 140.0,
-        },
-        truth_oversample: 2,
-        tif: TrueTif::bonnet(800.0),
         pitch_mm,
-        feed_min_mm_per_s: 2.0,
-        feed_max_mm_per_s: 12.0,
-        sample_hz: 10.0,
-        deposit_step_mm: 0.06,
-        spot_dwell_s: 20.0,
-        spot_noise_nm: 0.5,
-        spot_pixel_mm: None,
         spot_offset_mm: (0.2, -0.15),
-        noise_nm: 1.0,
-        noise_after_nm: Some(1.4),
-        dropout_fraction: 0.001,
-        dropout_discs: 3,
-        dropout_disc_radius_mm: (0.5, 2.0),
-        setup_tilt_nm: 15.0,
-        setup_piston_nm: 7.0,
-        aperture_diameter_mm: round.then_some(90.0),
-        effects: Vec::new(),
+        ..SynthConfig::realistic(
+            seed,
+            200,
+            100.0,
+            InitialSurface::realistic_texture(exponent),
+        )
+        .with_round_aperture(round, 90.0)
     }
 }
 

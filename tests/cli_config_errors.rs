@@ -192,21 +192,23 @@ fn vibration_table_errors_name_file_key_and_nearest_name() {
     );
 }
 
+/// The commands that read a run recipe (FILE: the recipe, OUT: an output directory).
+const RECIPE_READERS: [&[&str]; 4] = [
+    &["simulate", "FILE", "--out", "OUT"],
+    &["calibrate", "FILE", "--out", "OUT"],
+    &[
+        "compare", "--run", "a=FILE", "--run", "b=FILE", "--out", "OUT",
+    ],
+    &["vibration", "FILE", "--json", "-"],
+];
+
 /// Every command that reads a run recipe (`simulate`, `calibrate`, `compare --run`,
 /// `vibration`) rejects the same unknown table, unknown key and syntax error the same way:
 /// exit 2, one line naming the file, the key and the nearest valid name, or the parser's cause.
 #[test]
 fn every_recipe_reader_rejects_unknown_tables_and_keys() {
     let r = |a: &str, b: &str| RECIPE.replace(a, b);
-    let readers: [&[&str]; 4] = [
-        &["simulate", "FILE", "--out", "OUT"],
-        &["calibrate", "FILE", "--out", "OUT"],
-        &[
-            "compare", "--run", "a=FILE", "--run", "b=FILE", "--out", "OUT",
-        ],
-        &["vibration", "FILE", "--json", "-"],
-    ];
-    for args in readers {
+    for args in RECIPE_READERS {
         check(
             args[0],
             "run.toml",
@@ -250,15 +252,7 @@ fn a_vibration_typo_in_a_run_recipe_is_an_error_everywhere() {
     assert_ne!(good, text, "the sample recipe names its files");
     assert!(good.contains("\nzeta1 = "), "the sample sets zeta1: {good}");
     let typo = good.replace("\nzeta1 = ", "\nzeta_1 = ");
-    let readers: [&[&str]; 4] = [
-        &["simulate", "FILE", "--out", "OUT"],
-        &["calibrate", "FILE", "--out", "OUT"],
-        &[
-            "compare", "--run", "a=FILE", "--run", "b=FILE", "--out", "OUT",
-        ],
-        &["vibration", "FILE", "--json", "-"],
-    ];
-    for args in readers {
+    for args in RECIPE_READERS {
         check(
             args[0],
             "run.toml",

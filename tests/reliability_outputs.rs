@@ -432,6 +432,39 @@ fn held_lock_refuses(dir: &Path, c: Command) {
     assert_eq!(snapshot(dir), before);
 }
 
+/// A run into `dir` that fails part-way publishes nothing: with a directory standing where
+/// its file `last` goes, `second` exits 2 with one line naming `last`, emits nothing on
+/// stdout, leaves the previous run's files (`names`) as they were (same bytes, same inodes) and
+/// no staging file; with `last` free again, a live lock (this test process) refuses `third`
+/// before anything is written.
+fn fails_part_way_as_a_set(
+    dir: &Path,
+    names: &[String],
+    last: &str,
+    mut second: Command,
+    third: Command,
+) {
+    std::fs::remove_file(dir.join(last)).unwrap();
+    std::fs::create_dir(dir.join(last)).unwrap();
+    let before = snapshot(dir);
+    let o = second
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    one_line(&o, last);
+    assert!(o.stdout.is_empty(), "nothing emitted on a failed run");
+    assert_eq!(
+        snapshot(dir),
+        before,
+        "the previous run's files were replaced"
+    );
+    assert_eq!(listing(dir), names, "no staging or temporary file left");
+    std::fs::remove_dir(dir.join(last)).unwrap();
+    held_lock_refuses(dir, third);
+}
+
 /// A file's bytes and inode: an output set that is not published leaves both as they were
 /// (the old file-by-file writes replaced each file by rename, a new inode).
 fn snapshot(dir: &Path) -> Vec<(String, u64, Vec<u8>)> {
@@ -485,30 +518,12 @@ fn vibration_out_is_published_as_a_set() {
         assert!(names.contains(&f.to_string()), "{f} missing: {names:?}");
     }
     // The second run (another spindle speed: different plots) fails on its last file.
-    std::fs::remove_file(dir.join("timeseries.csv")).unwrap();
-    std::fs::create_dir(dir.join("timeseries.csv")).unwrap();
-    let before = snapshot(&dir);
-    let mut c = bin();
-    c.arg("vibration")
-        .arg(&r2)
-        .arg("--out")
-        .arg(&dir)
-        .stdout(Stdio::piped());
-    let o = c.stderr(Stdio::piped()).output().unwrap();
-    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
-    one_line(&o, "timeseries.csv");
-    assert!(o.stdout.is_empty(), "nothing emitted on a failed run");
-    assert_eq!(
-        snapshot(&dir),
-        before,
-        "the previous run's files were replaced"
-    );
-    assert_eq!(listing(&dir), names, "no staging or temporary file left");
-    // A live lock (this test process) refuses a second writer: nothing written.
-    std::fs::remove_dir(dir.join("timeseries.csv")).unwrap();
-    let mut c = bin();
-    c.arg("vibration").arg(&r2).arg("--out").arg(&dir);
-    held_lock_refuses(&dir, c);
+    let second = || {
+        let mut c = bin();
+        c.arg("vibration").arg(&r2).arg("--out").arg(&dir);
+        c
+    };
+    fails_part_way_as_a_set(&dir, &names, "timeseries.csv", second(), second());
 }
 
 /// Issue #18: `dwell --out` is one output set, as `vibration_out_is_published_as_a_set`.
@@ -542,32 +557,15 @@ fn dwell_out_is_published_as_a_set() {
     ] {
         assert!(names.contains(&f.to_string()), "{f} missing: {names:?}");
     }
-    std::fs::remove_file(dir.join("residual.png")).unwrap();
-    std::fs::create_dir(dir.join("residual.png")).unwrap();
-    let before = snapshot(&dir);
-    let mut c = bin();
-    c.arg("dwell")
+    let mut second = bin();
+    second
+        .arg("dwell")
         .arg(dwell_case())
         .args(["--method", "min-dwell", "--out"])
         .arg(&dir);
-    let o = c
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
-    one_line(&o, "residual.png");
-    assert!(o.stdout.is_empty(), "nothing emitted on a failed run");
-    assert_eq!(
-        snapshot(&dir),
-        before,
-        "the previous run's files were replaced"
-    );
-    assert_eq!(listing(&dir), names, "no staging or temporary file left");
-    std::fs::remove_dir(dir.join("residual.png")).unwrap();
-    let mut c = bin();
-    c.arg("dwell").arg(dwell_case()).arg("--out").arg(&dir);
-    held_lock_refuses(&dir, c);
+    let mut third = bin();
+    third.arg("dwell").arg(dwell_case()).arg("--out").arg(&dir);
+    fails_part_way_as_a_set(&dir, &names, "residual.png", second, third);
 }
 
 /// `spots --make-sample DIR` and `demo --generate-samples DIR` publish their maps and manifest
@@ -585,20 +583,12 @@ fn sample_generators_publish_as_a_set() {
     assert!(o.status.success(), "{}", err(&o));
     let names = listing(&dir);
     assert!(names.contains(&"manifest.toml".to_string()), "{names:?}");
-    std::fs::remove_file(dir.join("suppression_offset_1.0.dat")).unwrap();
-    std::fs::create_dir(dir.join("suppression_offset_1.0.dat")).unwrap();
-    let before = snapshot(&dir);
-    let mut c = bin();
-    c.args(["spots", "--make-sample"]).arg(&dir);
-    let o = run(c, Stdio::null());
-    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
-    one_line(&o, "suppression_offset_1.0.dat");
-    assert_eq!(snapshot(&dir), before, "the previous files were replaced");
-    assert_eq!(listing(&dir), names, "no staging or temporary file left");
-    std::fs::remove_dir(dir.join("suppression_offset_1.0.dat")).unwrap();
-    let mut c = bin();
-    c.args(["spots", "--make-sample"]).arg(&dir);
-    held_lock_refuses(&dir, c);
+    let again = || {
+        let mut c = bin();
+        c.args(["spots", "--make-sample"]).arg(&dir);
+        c
+    };
+    fails_part_way_as_a_set(&dir, &names, "suppression_offset_1.0.dat", again(), again());
 
     // demo --generate-samples: maps in sub-directories, the recipe runs and the README.
     let dir = d.path().join("samples");

@@ -94,8 +94,8 @@ fn recipe_readme() -> String {
          measured spot is that TIF dwelled {dwell} s, with 0.3 nm noise;\n\
          - path: raster along x, {p} mm pitch, feed {v0} to {v1} mm/s realising a dwell map \
          (more dwell where the part is high), acceleration-limited;\n\
-         - process where the vibration matters: spindle {rpm} rpm (second harmonic near the \
-         robot's resonance), normal-force fluctuation {fnn} N at the spindle harmonics and \
+         - process where the vibration matters: spindle {rpm} rpm (fundamental 9.3 Hz, on the \
+         robot model's soft principal mode, 9.33 Hz), normal-force fluctuation {fnn} N at the spindle harmonics and \
          {nf} N broadband, robot damping ratio {z}; the suppression run adds the \
          suppression element (the vibration model's suppression bonnet); at the paper's 1.6 mm/s \
          and 1000 rpm the spindle imprint is filtered out by the spot and nothing could be \

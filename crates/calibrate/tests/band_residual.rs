@@ -8,10 +8,11 @@
 //! 0): the process band, what the process can make, and the fine band, whose excess above its
 //! share of the floor is reported under `unexplained` with its band.
 
-use bonnetlab_calibrate::pipeline::problem_with_spot;
-use bonnetlab_calibrate::run::{calibrate, Calibration, Options};
-use bonnetlab_calibrate::synth::true_tif::TrueTif;
-use bonnetlab_calibrate::synth::{generate, InitialSurface, Injected, SynthConfig};
+mod common;
+
+use bonnetlab_calibrate::run::Calibration;
+use bonnetlab_calibrate::synth::{InitialSurface, Injected, SynthConfig};
+use common::{alternate, run};
 
 /// A 100 mm part on a 300 x 300 map (0.333 mm pixels): power-law surface (1-D PSD exponent
 /// `exponent`), a 90 mm round aperture on odd `r`, 3-4 circular dropouts, noise `nb` / `na`
@@ -24,37 +25,17 @@ fn scenario(
     os: usize,
     effects: Vec<Injected>,
 ) -> SynthConfig {
-    let n = 300;
-    let d = 100.0 / n as f64;
+    let base = SynthConfig::realistic(
+        70 + r,
+        300,
+        100.0,
+        InitialSurface::realistic_texture(exponent),
+    )
+    .with_noise_nm(nb, na);
     SynthConfig {
-        seed: 70 + r,
-        rows: n,
-        cols: n,
-        pixel_mm: d,
-        surface: InitialSurface::PowerLaw {
-            exponent,
-            rms_nm: 140.0,
-        },
         truth_oversample: os,
-        tif: TrueTif::bonnet(800.0),
-        pitch_mm: if r.is_multiple_of(2) { 2.0 } else { 3.0 },
-        feed_min_mm_per_s: 2.0,
-        feed_max_mm_per_s: 12.0,
-        sample_hz: 10.0,
-        deposit_step_mm: 0.06,
-        spot_dwell_s: 20.0,
-        spot_noise_nm: 0.5,
-        spot_pixel_mm: None,
-        spot_offset_mm: (0.15, -0.2),
-        noise_nm: nb,
-        noise_after_nm: Some(na),
-        dropout_fraction: 0.001,
-        dropout_discs: 3 + r as usize % 2,
-        dropout_disc_radius_mm: (0.5, 2.0),
-        setup_tilt_nm: 15.0,
-        setup_piston_nm: 7.0,
-        aperture_diameter_mm: (!r.is_multiple_of(2)).then_some(90.0),
         effects,
+        ..alternate(base, r, 90.0)
     }
 }
 
@@ -65,22 +46,6 @@ fn misregistration() -> Injected {
         dy_mm: -0.12,
         rotation_deg: 0.05,
     }
-}
-
-fn run(cfg: &SynthConfig) -> (Calibration, f64) {
-    let run = generate(cfg).expect("generate");
-    let p = problem_with_spot(
-        &run.before,
-        &run.after,
-        &run.spot,
-        run.spot_dwell_s,
-        &run.path,
-    )
-    .expect("problem");
-    (
-        calibrate(&p, &Options::default()).expect("calibrate"),
-        run.true_noise_floor_nm,
-    )
 }
 
 fn summary(c: &Calibration, truth: f64) -> String {

@@ -5,11 +5,13 @@
 //! effect the library has no kind for is reported by a fallback kind that localises it, and the
 //! residual is cut by at least half; on null runs the fallback accepts nothing.
 
-use bonnetlab_calibrate::pipeline::problem_with_spot;
-use bonnetlab_calibrate::run::{calibrate, Calibration, EffectReport, Options};
+mod common;
+
+use bonnetlab_calibrate::run::{Calibration, EffectReport};
 use bonnetlab_calibrate::synth::true_tif::TrueTif;
-use bonnetlab_calibrate::synth::{generate, InitialSurface, Injected, SynthConfig};
+use bonnetlab_calibrate::synth::{InitialSurface, Injected, SynthConfig};
 use bonnetlab_process::tif::GaussianTif;
+use common::{alternate, run};
 
 /// A 70 mm part on a 200 x 200 map (0.35 mm pixels): power-law surface (exponent 1.8-2.6),
 /// round aperture on odd `r`, 3-4 circular dropouts, 0.5-1.8 nm noise per map.
@@ -19,39 +21,20 @@ use bonnetlab_process::tif::GaussianTif;
 /// baseline residual at the floor: nothing to find). The direction runs use a smaller spot
 /// (`small_spot`), through which the alternation shows.
 fn scenario(r: u64, tif: TrueTif, effects: Vec<Injected>) -> SynthConfig {
-    let n = 200;
-    let d = 70.0 / n as f64;
     let exponent = [2.2, 1.8, 2.6, 2.0][r as usize % 4];
     let (nb, na) = [(1.0, 0.7), (0.5, 1.6), (1.8, 1.2), (0.8, 0.9)][r as usize % 4];
+    let base = SynthConfig::realistic(
+        70 + r,
+        200,
+        70.0,
+        InitialSurface::realistic_texture(exponent),
+    )
+    .with_noise_nm(nb, na);
     SynthConfig {
-        seed: 70 + r,
-        rows: n,
-        cols: n,
-        pixel_mm: d,
-        surface: InitialSurface::PowerLaw {
-            exponent,
-            rms_nm: 140.0,
-        },
-        truth_oversample: 2,
         tif,
-        pitch_mm: if r.is_multiple_of(2) { 2.0 } else { 3.0 },
-        feed_min_mm_per_s: 2.0,
-        feed_max_mm_per_s: 12.0,
-        sample_hz: 10.0,
         deposit_step_mm: 0.08,
-        spot_dwell_s: 20.0,
-        spot_noise_nm: 0.5,
-        spot_pixel_mm: None,
-        spot_offset_mm: (0.15, -0.2),
-        noise_nm: nb,
-        noise_after_nm: Some(na),
-        dropout_fraction: 0.001,
-        dropout_discs: 3 + r as usize % 2,
-        dropout_disc_radius_mm: (0.5, 2.0),
-        setup_tilt_nm: 15.0,
-        setup_piston_nm: 7.0,
-        aperture_diameter_mm: (!r.is_multiple_of(2)).then_some(63.0),
         effects,
+        ..alternate(base, r, 63.0)
     }
 }
 
@@ -66,23 +49,6 @@ fn small_spot() -> TrueTif {
         diameter_mm: 7.0,
         peak_rate_nm_per_s: 40.0,
     })
-}
-
-/// The calibration and the true white-noise floor of before - after (nm).
-fn run(cfg: &SynthConfig) -> (Calibration, f64) {
-    let run = generate(cfg).expect("generate");
-    let p = problem_with_spot(
-        &run.before,
-        &run.after,
-        &run.spot,
-        run.spot_dwell_s,
-        &run.path,
-    )
-    .expect("problem");
-    (
-        calibrate(&p, &Options::default()).expect("calibrate"),
-        run.true_noise_floor_nm,
-    )
 }
 
 fn kinds(c: &Calibration) -> Vec<&str> {

@@ -5,62 +5,26 @@
 //! made by exact time-domain deposition (`synth`, never calibrate's FFT model). The truth of the
 //! floor is the two maps' white noise in quadrature.
 
-use bonnetlab_calibrate::pipeline::problem_with_spot;
-use bonnetlab_calibrate::run::{calibrate, Calibration, Options};
-use bonnetlab_calibrate::synth::true_tif::TrueTif;
-use bonnetlab_calibrate::synth::{generate, InitialSurface, Injected, SynthConfig};
+mod common;
+
+use bonnetlab_calibrate::synth::{InitialSurface, Injected, SynthConfig};
+use common::{alternate, run};
 
 /// A 70 mm part on a 200 x 200 map (0.35 mm pixels): power-law surface, round aperture on odd
 /// `r`, 3-4 circular dropouts, noise `nb` / `na` nm.
 fn scenario(r: u64, exponent: f64, nb: f64, na: f64, effects: Vec<Injected>) -> SynthConfig {
-    let n = 200;
-    let d = 70.0 / n as f64;
+    let base = SynthConfig::realistic(
+        40 + r,
+        200,
+        70.0,
+        InitialSurface::realistic_texture(exponent),
+    )
+    .with_noise_nm(nb, na);
     SynthConfig {
-        seed: 40 + r,
-        rows: n,
-        cols: n,
-        pixel_mm: d,
-        surface: InitialSurface::PowerLaw {
-            exponent,
-            rms_nm: 140.0,
-        },
-        truth_oversample: 2,
-        tif: TrueTif::bonnet(800.0),
-        pitch_mm: if r.is_multiple_of(2) { 2.0 } else { 3.0 },
-        feed_min_mm_per_s: 2.0,
-        feed_max_mm_per_s: 12.0,
-        sample_hz: 10.0,
         deposit_step_mm: 0.08,
-        spot_dwell_s: 20.0,
-        spot_noise_nm: 0.5,
-        spot_pixel_mm: None,
-        spot_offset_mm: (0.15, -0.2),
-        noise_nm: nb,
-        noise_after_nm: Some(na),
-        dropout_fraction: 0.001,
-        dropout_discs: 3 + r as usize % 2,
-        dropout_disc_radius_mm: (0.5, 2.0),
-        setup_tilt_nm: 15.0,
-        setup_piston_nm: 7.0,
-        aperture_diameter_mm: (!r.is_multiple_of(2)).then_some(63.0),
         effects,
+        ..alternate(base, r, 63.0)
     }
-}
-
-fn run(cfg: &SynthConfig) -> (Calibration, f64) {
-    let run = generate(cfg).expect("generate");
-    let p = problem_with_spot(
-        &run.before,
-        &run.after,
-        &run.spot,
-        run.spot_dwell_s,
-        &run.path,
-    )
-    .expect("problem");
-    (
-        calibrate(&p, &Options::default()).expect("calibrate"),
-        run.true_noise_floor_nm,
-    )
 }
 
 /// Null runs (nothing injected): the reported floor is within 15 % of the truth (each map
