@@ -166,6 +166,10 @@ pub struct Problem {
 
 type ResampleCache = Mutex<Vec<([f64; 3], Arc<(Array2<f64>, Array2<bool>)>)>>;
 
+/// Memory the cached channel sets (one per TIF scale) may take, about; at least 5 sets are
+/// kept, and at most 24 (enough for the scan of `tif_scale` and the scale the model sits at).
+const KERNEL_CACHE_BYTES: usize = 192 << 20;
+
 /// Bytes of columns kept between requests (see [`ColumnCache`]).
 const COLUMN_CACHE_BYTES: usize = 128 << 20;
 
@@ -335,12 +339,16 @@ impl Problem {
     /// The forward model's channels at a TIF scale, cached.
     pub fn kernels(&self, scale: f64) -> Result<Arc<Kernels>, CalibrateError> {
         let scale = scale.clamp(0.5, MAX_SCALE);
-        if let Ok(cache) = self.kernels.lock() {
-            if let Some(k) = cache
+        if let Ok(mut cache) = self.kernels.lock() {
+            if let Some(n) = cache
                 .iter()
-                .find(|k| k.lock().is_ok_and(|c| c.scale() == scale))
+                .position(|k| k.lock().is_ok_and(|c| c.scale() == scale))
             {
-                return Ok(k.clone());
+                // Most recently used last: the scan of `tif_scale` builds a set per scale and
+                // must not push out the scale the model sits at.
+                let k = cache.remove(n);
+                cache.push(k.clone());
+                return Ok(k);
             }
         }
         let set = Arc::new(Mutex::new(Channels::new(
@@ -349,12 +357,19 @@ impl Problem {
             scale,
         )?));
         if let Ok(mut cache) = self.kernels.lock() {
-            if cache.len() > 4 {
+            if cache.len() >= self.max_kernel_sets() {
                 cache.remove(0);
             }
             cache.push(set.clone());
         }
         Ok(set)
+    }
+
+    /// Channel sets kept (see [`KERNEL_CACHE_BYTES`]).
+    fn max_kernel_sets(&self) -> usize {
+        // A set holds a few tens of grown-grid arrays (spectra of its kernels, dwell maps).
+        let per_set = 20 * 8 * (self.grid.rows + 40) * (self.grid.cols + 40);
+        (KERNEL_CACHE_BYTES / per_set.max(1)).clamp(5, 24)
     }
 
     /// Removal through one channel of the executed path `exec` with optional per-sample rate

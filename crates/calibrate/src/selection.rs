@@ -52,12 +52,17 @@ pub fn split(p: &Problem) -> Split {
 pub struct BaseGram {
     g: [Vec<Vec<f64>>; 2],
     r: [Vec<f64>; 2],
-    /// Weighted selection of each half (w where the pixel is in the half, else 0).
-    ws: [Vec<f64>; 2],
     /// Base coefficients fitted on half `fold`.
     cb: [Option<Vec<f64>>; 2],
     /// Residual `m - base prediction(fitted on fold)` on the pixels of the other half (0 else).
     eb: [Vec<f64>; 2],
+    /// Pixels of each half (where `ws` is not 0), ascending, and on them the half's weights,
+    /// the current columns and the measured removal: the held-out sums skip only exact zeros,
+    /// in the same order, so they are the same to the bit as over every pixel.
+    on: [Vec<usize>; 2],
+    ws_on: [Vec<f64>; 2],
+    cols_on: [Vec<Vec<f64>>; 2],
+    m_on: [Vec<f64>; 2],
 }
 
 pub fn base_gram(ev: &Eval, sp: &Split) -> BaseGram {
@@ -78,12 +83,27 @@ pub fn base_gram(ev: &Eval, sp: &Split) -> BaseGram {
         Some(c) => residual_on(&ev.m, &cols, c, &ws[1 - fold]),
         None => vec![0.0; ev.m.len()],
     });
+    let on = [0, 1].map(|f| {
+        ws[f]
+            .iter()
+            .enumerate()
+            .filter(|(_, w)| **w != 0.0)
+            .map(|(i, _)| i)
+            .collect::<Vec<usize>>()
+    });
+    let gather = |v: &[f64], f: usize| -> Vec<f64> { on[f].iter().map(|&i| v[i]).collect() };
+    let ws_on = [gather(&ws[0], 0), gather(&ws[1], 1)];
+    let cols_on = [0, 1].map(|f| cols.iter().map(|c| gather(c, f)).collect());
+    let m_on = [gather(&ev.m, 0), gather(&ev.m, 1)];
     BaseGram {
         g: [ga, gb],
         r: [ra, rb],
-        ws,
         cb,
         eb,
+        on,
+        ws_on,
+        cols_on,
+        m_on,
     }
 }
 
@@ -132,7 +152,12 @@ pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Scor
     let mut d = vec![0.0; sp.n_blocks];
     let mut sse_base = 0.0;
     for fold in 0..2 {
-        let ws = &bg.ws[fold];
+        let ws = &bg.ws_on[fold];
+        let on = &bg.on[fold];
+        let extra_on: Vec<Vec<f64>> = extra
+            .iter()
+            .map(|c| on.iter().map(|&i| c[i]).collect())
+            .collect();
         // Full Gram = base + cross terms with the extra columns.
         let n = nb + ne;
         let mut g = vec![vec![0.0; n]; n];
@@ -143,41 +168,37 @@ pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Scor
         }
         for e in 0..ne {
             for a in 0..nb {
-                let v = dot_w(&extra[e], &ev.cols[a], ws);
+                let v = dot_w(&extra_on[e], &bg.cols_on[fold][a], ws);
                 g[nb + e][a] = v;
                 g[a][nb + e] = v;
             }
             for f in e..ne {
-                let v = dot_w(&extra[e], &extra[f], ws);
+                let v = dot_w(&extra_on[e], &extra_on[f], ws);
                 g[nb + e][nb + f] = v;
                 g[nb + f][nb + e] = v;
             }
-            r[nb + e] = dot_w(&extra[e], &ev.m, ws);
+            r[nb + e] = dot_w(&extra_on[e], &bg.m_on[fold], ws);
         }
         let (Some(cb), Some(cf)) = (&bg.cb[fold], lsq::solve(&g, &r)) else {
             return Score::default();
         };
         // Score on the other half: ef = eb - sum_a (cf_a - cb_a) col_a - sum_e cf_e extra_e.
-        let test = &bg.ws[1 - fold];
+        let test = &bg.on[1 - fold];
         let eb = &bg.eb[fold];
-        let mut ef = eb.clone();
+        let mut ef: Vec<f64> = test.iter().map(|&i| eb[i]).collect();
         let cols = ev
             .cols
             .iter()
             .zip(cf[..nb].iter().zip(cb).map(|(f, b)| f - b))
             .chain(extra.iter().zip(cf[nb..].iter().copied()));
         for (col, c) in cols {
-            for ((e, v), t) in ef.iter_mut().zip(col).zip(test) {
-                if *t != 0.0 {
-                    *e -= c * v;
-                }
+            for (e, &i) in ef.iter_mut().zip(test) {
+                *e -= c * col[i];
             }
         }
-        for (i, t) in test.iter().enumerate() {
-            if *t != 0.0 {
-                d[sp.block[i]] += eb[i] * eb[i] - ef[i] * ef[i];
-                sse_base += eb[i] * eb[i];
-            }
+        for (e, &i) in ef.iter().zip(test) {
+            d[sp.block[i]] += eb[i] * eb[i] - e * e;
+            sse_base += eb[i] * eb[i];
         }
     }
     let used: Vec<f64> = d.iter().cloned().filter(|v| *v != 0.0).collect();

@@ -454,6 +454,9 @@ pub struct FastRemoval {
     /// weights (the calibration asks for one executed path with many rate terms).
     walk: Vec<SubStep>,
     walk_at: Vec<(usize, f64)>,
+    /// Line phases of `walk` along X and along Y (they depend on the path's own dwell only, so
+    /// every weighting of the walk has the same).
+    walk_phases: [Option<LinePhases>; 2],
     /// Zeroed dwell maps of the grown grid, for reuse.
     pool: Vec<Array2<f64>>,
 }
@@ -525,6 +528,7 @@ impl FastRemoval {
             walked: None,
             walk: Vec::new(),
             walk_at: Vec::new(),
+            walk_phases: [None, None],
             pool: Vec::new(),
         })
     }
@@ -656,9 +660,10 @@ impl FastRemoval {
             self.walk_path(path);
         }
         let walk = std::mem::take(&mut self.walk);
+        let phases = std::mem::take(&mut self.walk_phases);
         let out = match weights {
             // The walk's own dwell is `dt` times a unit weight.
-            None => self.removal_of_steps(&walk),
+            None => self.removal_of_steps(&walk, &phases),
             Some(_) => {
                 let mut steps = std::mem::take(&mut self.steps);
                 steps.clear();
@@ -670,12 +675,13 @@ impl FastRemoval {
                             ..*st
                         }),
                 );
-                let out = self.removal_of_steps(&steps);
+                let out = self.removal_of_steps(&steps, &phases);
                 self.steps = steps;
                 out
             }
         };
         self.walk = walk;
+        self.walk_phases = phases;
         out
     }
 
@@ -703,18 +709,22 @@ impl FastRemoval {
                 shares,
             })
         });
+        self.walk_phases = [line_phases(steps, 1), line_phases(steps, 2)];
         self.walked = Some(path.clone());
     }
 
-    fn removal_of_steps(&mut self, steps: &[SubStep]) -> Result<Array2<f64>, ProcessError> {
+    /// Removal of `steps` (a weighting of the walk) whose line phases are `[px, py]`.
+    fn removal_of_steps(
+        &mut self,
+        steps: &[SubStep],
+        [px, py]: &[Option<LinePhases>; 2],
+    ) -> Result<Array2<f64>, ProcessError> {
         // Dwell moving along X (Y) goes to its row (column) with the kernel of its line's
         // sub-row (sub-column) phase; when a path has too many line phases, or they spread,
         // it is shared linearly between kernels at the fixed phases j / PHASE_NODES instead.
         let nodes: Vec<f64> = (0..PHASE_NODES)
             .map(|j| j as f64 / PHASE_NODES as f64)
             .collect();
-        let px = line_phases(steps, 1);
-        let py = line_phases(steps, 2);
         let [sx, sy] = self.phase_kernels([
             px.as_ref().map_or(&nodes[..], |l| &l.phase[..]),
             py.as_ref().map_or(&nodes[..], |l| &l.phase[..]),

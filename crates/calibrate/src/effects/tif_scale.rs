@@ -50,6 +50,13 @@ impl Effect for TifScale {
 /// Widening factors scanned before the linearised start (see [`candidates`]).
 const SCAN: (f64, f64, f64) = (0.7, 1.45, 0.05);
 
+/// Least in-sample reduction of the residual sum of squares by the derivative column, as a
+/// fraction of it, for the scan to run. A fifth of the selection's `MIN_FRACTION`: pure noise
+/// gives about 1 / (analysis pixels) (a few 1e-5), and a widening the selection could accept
+/// (a held-out reduction of at least MIN_FRACTION) projects well above this on its own
+/// derivative.
+const SCAN_GATE: f64 = 0.2 * crate::selection::MIN_FRACTION;
+
 /// Profiled residual sum of squares with the accepted effects and a widening `t`.
 fn profiled_rss(cur: &Current, t: f64) -> Option<(f64, Vec<f64>)> {
     let mut e: Vec<Box<dyn Effect>> = cur.accepted.to_vec();
@@ -78,6 +85,22 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         .zip(&cur.ev.w)
         .map(|(r, w)| w * r * r)
         .sum::<f64>();
+    // The derivative column first: when it takes less than SCAN_GATE of the residual sum of
+    // squares, no widening is worth the scan (see SCAN_GATE) and it is the candidate.
+    let col = cur.plain_column(Channel::Ds);
+    let lin_gain = fit(cur.ev, std::slice::from_ref(&col))
+        .map(|f| base_rss - f.rss)
+        .unwrap_or(0.0);
+    if std::env::var_os("BONNETLAB_TRACE").is_some() {
+        eprintln!(
+            "tif_scale: derivative column takes {:.2e} of the residual (scan above {:.0e})",
+            lin_gain / base_rss.max(1e-300),
+            SCAN_GATE
+        );
+    }
+    if lin_gain < SCAN_GATE * base_rss {
+        return vec![derivative_candidate(col, s)];
+    }
     let mut best: Option<(f64, f64, Vec<f64>)> = None;
     let (lo, hi, step) = SCAN;
     let n = ((hi - lo) / step).round() as usize;
@@ -116,8 +139,12 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
             }),
         }];
     }
-    let col = cur.plain_column(Channel::Ds);
-    vec![Candidate {
+    vec![derivative_candidate(col, s)]
+}
+
+/// The linearised candidate: the derivative column `(dK/ds) * D` at the current scale `s`.
+fn derivative_candidate(col: Vec<f64>, s: f64) -> Candidate {
+    Candidate {
         key: "tif_scale".into(),
         kind: "tif_scale",
         extra: vec![col],
@@ -126,5 +153,5 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
                 scale: (s + c[0] / s0).clamp(0.5, MAX_SCALE),
             })
         }),
-    }]
+    }
 }
