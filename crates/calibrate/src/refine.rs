@@ -1,7 +1,10 @@
 //! Joint refinement of the accepted effects' non-linear parameters by variable projection:
 //! the linear coefficients (rate scale, rate effects, piston, tilt) are re-solved exactly for
-//! every trial of the non-linear ones, and Levenberg-Marquardt steps use forward-difference
-//! Jacobians of that profiled residual (each column one model evaluation).
+//! every trial of the non-linear ones, and Levenberg-Marquardt steps (the project's one driver,
+//! `bonnetlab_surface::lm`) use forward-difference Jacobians of that profiled residual (each
+//! column one model evaluation; the registration's columns are analytic).
+
+use bonnetlab_surface::lm::{self, LmProblem, LmSettings};
 
 use crate::error::CalibrateError;
 use crate::model::{evaluate, fit, Effect, Eval, Fit, Problem};
@@ -108,62 +111,88 @@ fn project_out(ev: &Eval, c: &[f64]) -> Result<Vec<f64>, CalibrateError> {
     Ok(out)
 }
 
+/// The refinement as the project's one Levenberg-Marquardt driver (`bonnetlab_surface::lm`)
+/// sees it: the effects' non-linear parameters, the profiled residual of the joint linear fit,
+/// and its mean square as the cost (the valid aperture may change slightly with registration,
+/// so sums of squares over different pixel counts are not comparable).
+struct Refinement<'a> {
+    p: &'a Problem,
+    /// The effects at the point the driver stands on.
+    effects: Vec<Box<dyn Effect>>,
+}
+
+impl Refinement<'_> {
+    /// The effects at `x`, and `x` as they hold it (an effect may normalise its parameters).
+    fn at(&self, x: &[f64]) -> (Vec<Box<dyn Effect>>, Vec<f64>) {
+        let mut e = self.effects.to_vec();
+        set_nl(&mut e, x);
+        let held = e.iter().flat_map(|e| e.nl()).collect();
+        (e, held)
+    }
+}
+
+impl LmProblem for Refinement<'_> {
+    type State = (Eval, Fit);
+    type Error = CalibrateError;
+
+    fn residual<'s>(&self, s: &'s (Eval, Fit)) -> &'s [f64] {
+        &s.1.resid
+    }
+
+    fn cost(&self, s: &(Eval, Fit)) -> f64 {
+        s.1.rss / s.1.n.max(1.0)
+    }
+
+    fn jacobian(&mut self, x: &[f64], s: &(Eval, Fit)) -> Result<Vec<Vec<f64>>, CalibrateError> {
+        self.effects = self.at(x).0;
+        jacobian(self.p, &self.effects, &s.0, &s.1, true)
+    }
+
+    fn propose(&self, x: &[f64], step: &[f64]) -> Vec<f64> {
+        let t: Vec<f64> = x.iter().zip(step).map(|(a, d)| a + d).collect();
+        self.at(&t).1
+    }
+
+    fn evaluate(
+        &mut self,
+        x: &[f64],
+        current: &(Eval, Fit),
+    ) -> Result<Option<(Eval, Fit)>, CalibrateError> {
+        let (trial, _) = self.at(x);
+        let ev = evaluate(self.p, &trial, Some(&current.0))?;
+        let f = fit(&ev, &[])?;
+        Ok(Some((ev, f)))
+    }
+}
+
 /// Refines the non-linear parameters in place; returns the final evaluation and fit.
 pub fn refine(
     p: &Problem,
     effects: &mut [Box<dyn Effect>],
     iters: usize,
 ) -> Result<(Eval, Fit), CalibrateError> {
-    let mut ev = evaluate(p, effects, None)?;
-    let mut f = fit(&ev, &[])?;
-    let (mut theta, _) = nl_vec(effects);
-    if theta.is_empty() {
+    let ev = evaluate(p, effects, None)?;
+    let f = fit(&ev, &[])?;
+    let (theta, _) = nl_vec(effects);
+    if theta.is_empty() || iters == 0 {
         return Ok((ev, f));
     }
-    let n = theta.len();
-    let mut lambda = 1e-3;
-    for _ in 0..iters {
-        let j = jacobian(p, effects, &ev, &f, true)?;
-        let mut jtj = vec![vec![0.0; n]; n];
-        let mut jtr = vec![0.0; n];
-        for a in 0..n {
-            for b in a..n {
-                let s: f64 = j[a].iter().zip(&j[b]).map(|(x, y)| x * y).sum();
-                jtj[a][b] = s;
-                jtj[b][a] = s;
-            }
-            jtr[a] = j[a].iter().zip(&f.resid).map(|(x, y)| x * y).sum();
-        }
-        let mut improved = false;
-        for _ in 0..6 {
-            let mut m = jtj.clone();
-            for (a, row) in m.iter_mut().enumerate() {
-                row[a] += lambda * jtj[a][a].max(1e-300);
-            }
-            let Some(delta) = crate::lsq::solve(&m, &jtr) else {
-                break;
-            };
-            let t: Vec<f64> = theta.iter().zip(&delta).map(|(a, d)| a - d).collect();
-            let mut trial: Vec<Box<dyn Effect>> = effects.to_vec();
-            set_nl(&mut trial, &t);
-            let ev_t = evaluate(p, &trial, Some(&ev))?;
-            let f_t = fit(&ev_t, &[])?;
-            // Compare mean squares: the valid aperture may change slightly with registration.
-            if f_t.rss / f_t.n.max(1.0) < f.rss / f.n.max(1.0) {
-                let gain = 1.0 - (f_t.rss / f_t.n.max(1.0)) / (f.rss / f.n.max(1.0));
-                set_nl(effects, &t);
-                theta = effects.iter().flat_map(|e| e.nl()).collect();
-                ev = ev_t;
-                f = f_t;
-                lambda = (lambda / 4.0).max(1e-7);
-                improved = gain > 1e-6;
-                break;
-            }
-            lambda *= 8.0;
-        }
-        if !improved {
-            break;
-        }
-    }
-    Ok((ev, f))
+    let settings = LmSettings {
+        max_iter: iters,
+        max_tries: 6,
+        lambda0: 1e-3,
+        increase: 8.0,
+        decrease: 4.0,
+        lambda_min: 1e-7,
+        rel_tol: 1e-6,
+        step_tol: 0.0,
+        diag_floor: 1e-300,
+    };
+    let mut problem = Refinement {
+        p,
+        effects: effects.to_vec(),
+    };
+    let out = lm::minimize(&mut problem, theta, (ev, f), &settings)?;
+    set_nl(effects, &out.x);
+    Ok(out.state)
 }
