@@ -25,7 +25,7 @@ const BLOCK: usize = 256;
 ///
 /// Every entry is one sequential sum over the pixels in ascending order, exactly as a plain
 /// loop `for i { s += w[i] * x[i] * y[i] }` forms it; the pixels are taken in blocks (each
-/// entry's running sum carried from block to block, four entries at a time for
+/// entry's running sum carried from block to block, eight or four entries at a time for
 /// instruction-level parallelism) so the columns are read from memory once per block rather
 /// than once per pair. The sums are the plain loop's to the bit.
 pub fn products(
@@ -38,54 +38,72 @@ pub fn products(
     let nt = targets.len();
     let mut acc = vec![vec![init; nt]; rows.len()];
     let total = picked.map_or(w.len(), |p| p.len());
-    // Block buffers: the targets on the block's pixels, the weights and `w x_r`.
-    let mut buf = vec![0.0; nt * BLOCK];
-    let mut wblk = vec![0.0; BLOCK];
+    // Gather buffers (used with `picked` only): the targets, the weights and the row.
+    let mut buf = vec![0.0; if picked.is_some() { nt * BLOCK } else { 0 }];
+    let mut wbuf = vec![0.0; BLOCK];
+    let mut xbuf = vec![0.0; BLOCK];
     let mut wx = vec![0.0; BLOCK];
-    let mut xb = vec![0.0; BLOCK];
     let mut lo = 0;
     while lo < total {
         let hi = (lo + BLOCK).min(total);
         let nb = hi - lo;
-        let load = |dst: &mut [f64], src: &[f64]| match picked {
-            Some(p) => {
-                for (d, &i) in dst.iter_mut().zip(&p[lo..hi]) {
-                    *d = src[i];
-                }
+        let gather = |dst: &mut [f64], src: &[f64], p: &[usize]| {
+            for (d, &i) in dst.iter_mut().zip(&p[lo..hi]) {
+                *d = src[i];
             }
-            None => dst.copy_from_slice(&src[lo..hi]),
         };
-        for (k, t) in targets.iter().enumerate() {
-            load(&mut buf[k * BLOCK..k * BLOCK + nb], t);
-        }
-        load(&mut wblk[..nb], w);
-        let col = |k: usize| &buf[k * BLOCK..k * BLOCK + nb];
+        let (cols, wblk): (Vec<&[f64]>, &[f64]) = match picked {
+            Some(p) => {
+                for (k, t) in targets.iter().enumerate() {
+                    gather(&mut buf[k * BLOCK..k * BLOCK + nb], t, p);
+                }
+                gather(&mut wbuf[..nb], w, p);
+                (
+                    (0..nt).map(|k| &buf[k * BLOCK..k * BLOCK + nb]).collect(),
+                    &wbuf[..nb],
+                )
+            }
+            None => (targets.iter().map(|t| &t[lo..hi]).collect(), &w[lo..hi]),
+        };
         for (r, row) in acc.iter_mut().enumerate() {
-            load(&mut xb[..nb], rows[r]);
-            for ((d, &wi), &xi) in wx[..nb].iter_mut().zip(&wblk[..nb]).zip(&xb[..nb]) {
+            let x: &[f64] = match picked {
+                Some(p) => {
+                    gather(&mut xbuf[..nb], rows[r], p);
+                    &xbuf[..nb]
+                }
+                None => &rows[r][lo..hi],
+            };
+            for ((d, &wi), &xi) in wx[..nb].iter_mut().zip(wblk).zip(x) {
                 *d = wi * xi;
             }
             let wx = &wx[..nb];
             let mut t = r;
-            while t + 4 <= nt {
-                let (c0, c1, c2, c3) = (col(t), col(t + 1), col(t + 2), col(t + 3));
-                let (c0, c1, c2, c3) = (&c0[..nb], &c1[..nb], &c2[..nb], &c3[..nb]);
-                let (mut s0, mut s1, mut s2, mut s3) = (row[t], row[t + 1], row[t + 2], row[t + 3]);
+            while t + 8 <= nt {
+                let c: [&[f64]; 8] = std::array::from_fn(|k| &cols[t + k][..nb]);
+                let mut s: [f64; 8] = std::array::from_fn(|k| row[t + k]);
                 for i in 0..nb {
                     let x = wx[i];
-                    s0 += x * c0[i];
-                    s1 += x * c1[i];
-                    s2 += x * c2[i];
-                    s3 += x * c3[i];
+                    for k in 0..8 {
+                        s[k] += x * c[k][i];
+                    }
                 }
-                row[t] = s0;
-                row[t + 1] = s1;
-                row[t + 2] = s2;
-                row[t + 3] = s3;
+                row[t..t + 8].copy_from_slice(&s);
+                t += 8;
+            }
+            while t + 4 <= nt {
+                let c: [&[f64]; 4] = std::array::from_fn(|k| &cols[t + k][..nb]);
+                let mut s: [f64; 4] = std::array::from_fn(|k| row[t + k]);
+                for i in 0..nb {
+                    let x = wx[i];
+                    for k in 0..4 {
+                        s[k] += x * c[k][i];
+                    }
+                }
+                row[t..t + 4].copy_from_slice(&s);
                 t += 4;
             }
             while t < nt {
-                let c = &col(t)[..nb];
+                let c = &cols[t][..nb];
                 let mut s = row[t];
                 for i in 0..nb {
                     s += wx[i] * c[i];
@@ -196,7 +214,7 @@ mod tests {
             state ^= state << 17;
             (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
         };
-        for n in [1usize, 3, 4, 5, 8, 9] {
+        for n in [1usize, 3, 4, 5, 8, 9, 12, 15] {
             let cols: Vec<Vec<f64>> = (0..n)
                 .map(|_| (0..len).map(|_| next() * 1e3).collect())
                 .collect();
