@@ -5,10 +5,15 @@
 //! `calibrate`. Results: reports/performance_calibrate.md.
 //!
 //! `cargo bench --bench calibrate`
+//!
+//! One run without criterion (for profiling and side-by-side CPU comparisons):
+//! `BONNETLAB_CALIBRATE_ONCE=800 target/release/deps/calibrate-<hash>` generates the 800 x 800
+//! run, calibrates it once, prints the CPU time (all threads, s) and wall time of the timed part
+//! and writes the calibration's JSON to the file named by `BONNETLAB_CALIBRATE_JSON` if set.
 
 use bonnetlab::calibrate::run::{calibrate, Options};
 use bonnetlab::calibrate::synth::{generate, SynthConfig, SynthRun};
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, Criterion};
 
 fn make(n: usize) -> SynthRun {
     generate(&SynthConfig::reference_large_run(n)).expect("synthetic run")
@@ -38,5 +43,56 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
+/// CPU time of this process so far (user + system, all threads, s), from /proc/self/stat.
+fn cpu_s() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let after = stat.rsplit(')').next().unwrap_or("");
+    let f: Vec<&str> = after.split_whitespace().collect();
+    let ticks = |i: usize| {
+        f.get(i)
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or(f64::NAN)
+    };
+    // Fields 14 and 15 of the stat line (utime, stime) are 11 and 12 after the ')'.
+    (ticks(11) + ticks(12)) / 100.0
+}
+
+fn once(n: usize) {
+    let run = make(n);
+    let (c0, t0) = (cpu_s(), std::time::Instant::now());
+    let p = bonnetlab::calibrate::pipeline::problem_with_spot(
+        &run.before,
+        &run.after,
+        &run.spot,
+        run.spot_dwell_s,
+        &run.path,
+    )
+    .expect("problem");
+    let cal = calibrate(&p, &Options::default()).expect("calibration");
+    let (cpu, wall) = (cpu_s() - c0, t0.elapsed().as_secs_f64());
+    println!(
+        "{n}x{n}: cpu {cpu:.2} s, wall {wall:.2} s, effects {:?}",
+        cal.effects
+            .iter()
+            .map(|e| e.kind.as_str())
+            .collect::<Vec<_>>()
+    );
+    if let Ok(out) = std::env::var("BONNETLAB_CALIBRATE_JSON") {
+        let json = serde_json::to_string_pretty(&cal).expect("json");
+        std::fs::write(out, json).expect("write json");
+    }
+}
+
 criterion_group!(benches, bench);
-criterion_main!(benches);
+
+fn main() {
+    if let Some(n) = std::env::var("BONNETLAB_CALIBRATE_ONCE")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+    {
+        once(n);
+        return;
+    }
+    benches();
+    Criterion::default().configure_from_args().final_summary();
+}

@@ -139,11 +139,15 @@ impl Score {
     }
 }
 
-fn dot_w(a: &[f64], b: &[f64], ws: &[f64]) -> f64 {
-    a.iter().zip(b).zip(ws).map(|((x, y), w)| w * x * y).sum()
-}
+/// Pixels per block of the held-out residual update (the block's residuals stay in L1).
+const BLOCK: usize = 512;
 
 /// Two-fold held-out score of adding `extra` columns to the current model.
+///
+/// The cross terms are [`lsq::products`] (each the same sequential sum as a plain loop over the
+/// half's pixels, starting from -0.0 like `Iterator::sum`), and the residual update runs over
+/// blocks of the scoring half subtracting the columns in the same order per pixel, so the
+/// score is the same to the bit as the column-by-column loops it replaces.
 // Index loops fill a symmetric Gram matrix; iterators would hide the (row, column) pairing.
 #[allow(clippy::needless_range_loop)]
 pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Score {
@@ -151,14 +155,23 @@ pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Scor
     let ne = extra.len();
     let mut d = vec![0.0; sp.n_blocks];
     let mut sse_base = 0.0;
+    // The extra columns gathered on each half's pixels.
+    let extra_half: [Vec<Vec<f64>>; 2] = [0, 1].map(|f| {
+        extra
+            .iter()
+            .map(|c| bg.on[f].iter().map(|&i| c[i]).collect())
+            .collect()
+    });
     for fold in 0..2 {
         let ws = &bg.ws_on[fold];
-        let on = &bg.on[fold];
-        let extra_on: Vec<Vec<f64>> = extra
-            .iter()
-            .map(|c| on.iter().map(|&i| c[i]).collect())
-            .collect();
-        // Full Gram = base + cross terms with the extra columns.
+        let extra_on = &extra_half[fold];
+        // Full Gram = base + cross terms with the extra columns: row e of `x` against the
+        // extras from e on, then the base columns, then m.
+        let rows: Vec<&[f64]> = extra_on.iter().map(|c| c.as_slice()).collect();
+        let mut targets = rows.clone();
+        targets.extend(bg.cols_on[fold].iter().map(|c| c.as_slice()));
+        targets.push(&bg.m_on[fold]);
+        let x = lsq::products(&rows, &targets, ws, None, -0.0);
         let n = nb + ne;
         let mut g = vec![vec![0.0; n]; n];
         let mut r = vec![0.0; n];
@@ -168,37 +181,53 @@ pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Scor
         }
         for e in 0..ne {
             for a in 0..nb {
-                let v = dot_w(&extra_on[e], &bg.cols_on[fold][a], ws);
+                let v = x[e][ne + a];
                 g[nb + e][a] = v;
                 g[a][nb + e] = v;
             }
             for f in e..ne {
-                let v = dot_w(&extra_on[e], &extra_on[f], ws);
+                let v = x[e][f];
                 g[nb + e][nb + f] = v;
                 g[nb + f][nb + e] = v;
             }
-            r[nb + e] = dot_w(&extra_on[e], &bg.m_on[fold], ws);
+            r[nb + e] = x[e][ne + nb];
         }
         let (Some(cb), Some(cf)) = (&bg.cb[fold], lsq::solve(&g, &r)) else {
             return Score::default();
         };
-        // Score on the other half: ef = eb - sum_a (cf_a - cb_a) col_a - sum_e cf_e extra_e.
+        // Score on the other half: ef = eb - sum_a (cf_a - cb_a) col_a - sum_e cf_e extra_e,
+        // the columns gathered on the scoring half's pixels.
         let test = &bg.on[1 - fold];
         let eb = &bg.eb[fold];
-        let mut ef: Vec<f64> = test.iter().map(|&i| eb[i]).collect();
-        let cols = ev
-            .cols
+        let cols: Vec<(&[f64], f64)> = bg.cols_on[1 - fold]
             .iter()
+            .map(|c| c.as_slice())
             .zip(cf[..nb].iter().zip(cb).map(|(f, b)| f - b))
-            .chain(extra.iter().zip(cf[nb..].iter().copied()));
-        for (col, c) in cols {
-            for (e, &i) in ef.iter_mut().zip(test) {
-                *e -= c * col[i];
+            .chain(
+                extra_half[1 - fold]
+                    .iter()
+                    .map(|c| c.as_slice())
+                    .zip(cf[nb..].iter().copied()),
+            )
+            .collect();
+        let mut ef = [0.0; BLOCK];
+        let mut lo = 0;
+        while lo < test.len() {
+            let hi = (lo + BLOCK).min(test.len());
+            let ef = &mut ef[..hi - lo];
+            for (e, &i) in ef.iter_mut().zip(&test[lo..hi]) {
+                *e = eb[i];
             }
-        }
-        for (e, &i) in ef.iter().zip(test) {
-            d[sp.block[i]] += eb[i] * eb[i] - e * e;
-            sse_base += eb[i] * eb[i];
+            for (col, c) in &cols {
+                for (e, v) in ef.iter_mut().zip(&col[lo..hi]) {
+                    *e -= c * v;
+                }
+            }
+            for (e, &i) in ef.iter().zip(&test[lo..hi]) {
+                d[sp.block[i]] += eb[i] * eb[i] - e * e;
+                sse_base += eb[i] * eb[i];
+            }
+            lo = hi;
         }
     }
     let used: Vec<f64> = d.iter().cloned().filter(|v| *v != 0.0).collect();
