@@ -26,14 +26,7 @@ fn bench(c: &mut Criterion) {
         let run = make(n);
         g.bench_function(format!("{n}x{n}_full_library"), |b| {
             b.iter(|| {
-                let p = bonnetlab::calibrate::pipeline::problem_with_spot(
-                    &run.before,
-                    &run.after,
-                    &run.spot,
-                    run.spot_dwell_s,
-                    &run.path,
-                )
-                .expect("problem");
+                let p = run.problem().expect("problem");
                 let cal = calibrate(&p, &Options::default()).expect("calibration");
                 assert_eq!(cal.effects.len(), 2);
                 cal
@@ -60,14 +53,7 @@ fn cpu_s() -> f64 {
 fn once(n: usize) {
     let run = make(n);
     let (c0, t0) = (cpu_s(), std::time::Instant::now());
-    let p = bonnetlab::calibrate::pipeline::problem_with_spot(
-        &run.before,
-        &run.after,
-        &run.spot,
-        run.spot_dwell_s,
-        &run.path,
-    )
-    .expect("problem");
+    let p = run.problem().expect("problem");
     let cal = calibrate(&p, &Options::default()).expect("calibration");
     let (cpu, wall) = (cpu_s() - c0, t0.elapsed().as_secs_f64());
     println!(

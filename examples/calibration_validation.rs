@@ -33,7 +33,6 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use bonnetlab::calibrate::pipeline::problem_with_spot;
 use bonnetlab::calibrate::run::{calibrate, Calibration, Options};
 use bonnetlab::calibrate::synth::{
     generate, InitialSurface, Injected, SynthConfig, Waveform, WiggleCoord,
@@ -439,14 +438,7 @@ fn signal(
 ) -> Result<String, String> {
     use bonnetlab::calibrate::effects::{candidates, Current};
     use bonnetlab::calibrate::model::{evaluate, fit};
-    let p = problem_with_spot(
-        &run.before,
-        &run.after,
-        &run.spot,
-        run.spot_dwell_s,
-        &run.path,
-    )
-    .map_err(|e| e.to_string())?;
+    let p = run.problem().map_err(|e| e.to_string())?;
     let ev = evaluate(&p, &[], None).map_err(|e| e.to_string())?;
     let f = fit(&ev, &[]).map_err(|e| e.to_string())?;
     // d = removal(effect) - removal(twin) = twin.after - run.after (same before map).
@@ -578,14 +570,9 @@ fn main() {
                 }
             }
             let t = Instant::now();
-            let res = problem_with_spot(
-                &run.before,
-                &run.after,
-                &run.spot,
-                run.spot_dwell_s,
-                &run.path,
-            )
-            .and_then(|p| calibrate(&p, &Options::default()));
+            let res = run
+                .problem()
+                .and_then(|p| calibrate(&p, &Options::default()));
             let wall = t.elapsed().as_secs_f64();
             let o = match res {
                 Ok(cal) => {

@@ -12,7 +12,6 @@ mod common;
 use bonnetlab::calibrate::effects::direction_lag::DirectionLag;
 use bonnetlab::calibrate::effects::periodic_path_error::{Coord, PeriodicPathError};
 use bonnetlab::calibrate::model::{Effect, Linear};
-use bonnetlab::calibrate::pipeline::problem_with_spot;
 use bonnetlab::calibrate::synth::{generate, InitialSurface, Injected, SynthConfig};
 use common::calibrate::{param, run_cfg, summary};
 
@@ -58,14 +57,7 @@ fn narrower_spot_on_a_square_textured_part_is_found_as_tif_scale() {
 #[test]
 fn implausible_path_errors_are_rejected_with_the_reason() {
     let run = generate(&realistic(43, false, 2.0, 2.2)).unwrap();
-    let p = problem_with_spot(
-        &run.before,
-        &run.after,
-        &run.spot,
-        run.spot_dwell_s,
-        &run.path,
-    )
-    .unwrap();
+    let p = run.problem().unwrap();
     let lin = Linear::default();
     let wiggle = |coord, period, a| PeriodicPathError {
         axis_x: false,

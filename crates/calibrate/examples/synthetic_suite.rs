@@ -13,7 +13,6 @@
 
 use std::time::Instant;
 
-use bonnetlab_calibrate::pipeline::problem_with_spot;
 use bonnetlab_calibrate::run::{calibrate, Options};
 use bonnetlab_calibrate::synth::{generate, Injected, SynthConfig, Waveform, WiggleCoord};
 
@@ -130,14 +129,9 @@ fn main() {
         };
         let c0 = cpu_s();
         let t = Instant::now();
-        let out = problem_with_spot(
-            &run.before,
-            &run.after,
-            &run.spot,
-            run.spot_dwell_s,
-            &run.path,
-        )
-        .and_then(|p| calibrate(&p, &Options::default()));
+        let out = run
+            .problem()
+            .and_then(|p| calibrate(&p, &Options::default()));
         let wall = t.elapsed().as_secs_f64();
         let cpu = match (c0, cpu_s()) {
             (Some(a), Some(b)) => format!("{:.2}", b - a),

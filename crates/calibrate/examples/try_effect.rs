@@ -121,14 +121,7 @@ fn main() {
         eprintln!("wrote {}", recipe.display());
     }
     let t = std::time::Instant::now();
-    let p = bonnetlab_calibrate::pipeline::problem_with_spot(
-        &run.before,
-        &run.after,
-        &run.spot,
-        run.spot_dwell_s,
-        &run.path,
-    )
-    .unwrap();
+    let p = run.problem().unwrap();
     let c = calibrate(&p, &Options::default()).unwrap();
     eprintln!("calibrate {:?}", t.elapsed());
     eprintln!(

@@ -368,6 +368,20 @@ pub struct SynthRun {
     pub true_noise_floor_nm: f64,
 }
 
+impl SynthRun {
+    /// The calibration problem of this run, built as the CLI builds it from a run directory
+    /// (`pipeline::problem_with_spot`: the measured spot, its dwell and the path log).
+    pub fn problem(&self) -> Result<crate::model::Problem, CalibrateError> {
+        crate::pipeline::problem_with_spot(
+            &self.before,
+            &self.after,
+            &self.spot,
+            self.spot_dwell_s,
+            &self.path,
+        )
+    }
+}
+
 /// Independent random streams of one run.
 fn stream(seed: u64, purpose: u64) -> Rng {
     Rng::new(seed ^ purpose.wrapping_mul(0x9E37_79B9_7F4A_7C15))

@@ -5,7 +5,6 @@
 // Each test file includes the whole module and uses only part of it.
 #![allow(dead_code)]
 
-use bonnetlab_calibrate::pipeline::problem_with_spot;
 use bonnetlab_calibrate::run::{calibrate, Calibration, Options};
 use bonnetlab_calibrate::synth::{generate, SynthConfig};
 
@@ -23,14 +22,7 @@ pub fn alternate(cfg: SynthConfig, r: u64, round_mm: f64) -> SynthConfig {
 /// white-noise floor of before - after (nm).
 pub fn run(cfg: &SynthConfig) -> (Calibration, f64) {
     let run = generate(cfg).expect("generate");
-    let p = problem_with_spot(
-        &run.before,
-        &run.after,
-        &run.spot,
-        run.spot_dwell_s,
-        &run.path,
-    )
-    .expect("problem");
+    let p = run.problem().expect("problem");
     (
         calibrate(&p, &Options::default()).expect("calibrate"),
         run.true_noise_floor_nm,
