@@ -79,42 +79,35 @@ pub fn products(
             let wx = &wx[..nb];
             let mut t = r;
             while t + 8 <= nt {
-                let c: [&[f64]; 8] = std::array::from_fn(|k| &cols[t + k][..nb]);
-                let mut s: [f64; 8] = std::array::from_fn(|k| row[t + k]);
-                for i in 0..nb {
-                    let x = wx[i];
-                    for k in 0..8 {
-                        s[k] += x * c[k][i];
-                    }
-                }
-                row[t..t + 8].copy_from_slice(&s);
+                add_products::<8>(row, t, &cols, wx);
                 t += 8;
             }
             while t + 4 <= nt {
-                let c: [&[f64]; 4] = std::array::from_fn(|k| &cols[t + k][..nb]);
-                let mut s: [f64; 4] = std::array::from_fn(|k| row[t + k]);
-                for i in 0..nb {
-                    let x = wx[i];
-                    for k in 0..4 {
-                        s[k] += x * c[k][i];
-                    }
-                }
-                row[t..t + 4].copy_from_slice(&s);
+                add_products::<4>(row, t, &cols, wx);
                 t += 4;
             }
             while t < nt {
-                let c = &cols[t][..nb];
-                let mut s = row[t];
-                for i in 0..nb {
-                    s += wx[i] * c[i];
-                }
-                row[t] = s;
+                add_products::<1>(row, t, &cols, wx);
                 t += 1;
             }
         }
         lo = hi;
     }
     acc
+}
+
+/// `row[t..t + N] += sum_i wx[i] cols[t + k][i]`, each of the N sums sequential over `i` (N
+/// independent chains side by side).
+fn add_products<const N: usize>(row: &mut [f64], t: usize, cols: &[&[f64]], wx: &[f64]) {
+    let nb = wx.len();
+    let c: [&[f64]; N] = std::array::from_fn(|k| &cols[t + k][..nb]);
+    let mut s: [f64; N] = std::array::from_fn(|k| row[t + k]);
+    for (i, &x) in wx.iter().enumerate() {
+        for k in 0..N {
+            s[k] += x * c[k][i];
+        }
+    }
+    row[t..t + N].copy_from_slice(&s);
 }
 
 /// Weighted Gram matrix `G[a][b] = sum_i w_i c_a[i] c_b[i]` and `rhs[a] = sum_i w_i c_a[i] m_i`
