@@ -9,12 +9,7 @@
 //!
 //! Run: `cargo bench --bench vibration` (add `-- coupling` for the first only).
 
-use bonnetlab_process::path::RasterSpec;
-use bonnetlab_process::recipe::TifSource;
-use bonnetlab_process::simulate::ToolModel;
-use bonnetlab_process::tif::GaussianTif;
-use bonnetlab_process::Grid;
-use bonnetlab_vibration::coupling::{fast_maps, CouplingInput, CouplingOptions};
+use bonnetlab_vibration::coupling::{fast_maps, CouplingCase, CouplingOptions};
 use bonnetlab_vibration::params::{Bonnet, VibrationParams};
 use bonnetlab_vibration::response::{forced_response, spindle_band_frf};
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -22,21 +17,8 @@ use std::hint::black_box;
 use std::time::Duration;
 
 fn coupling(c: &mut Criterion) {
-    let grid = Grid::new(1001, 1001, 0.1, 0.1, 0.0, 0.0).expect("grid");
-    let tif = GaussianTif::new(2.0, 10.0, 10.0).expect("tif");
-    let tool = ToolModel::from_source(&TifSource::Gaussian(tif), None, 0.1, 0.1).expect("tool");
-    let mut spec = RasterSpec::over_rect((0.0, 100.0), (0.0, 100.0), 3.0, 1.16);
-    spec.overtravel_mm = 10.0;
-    let path = spec.generate().expect("path");
-    let params = VibrationParams::default();
-    let input = CouplingInput {
-        grid,
-        valid: None,
-        tool: &tool,
-        path: &path,
-        params: &params,
-        pitch_mm: Some(3.0),
-    };
+    let case = CouplingCase::bench_100mm().expect("bench case");
+    let (path, input) = (&case.path, case.input());
     let opts = CouplingOptions::default();
     eprintln!(
         "path duration {:.1} min, {} log samples",

@@ -149,13 +149,9 @@ fn same_numbers(a: &serde_json::Value, b: &serde_json::Value, at: &str) {
 /// bidirectional raster at 1.6 mm/s over the 100 mm part, 1000 rpm, 0.6 mm, 0.25 MPa.
 #[test]
 fn predicted_msf_equals_the_vibration_crate() {
-    use bonnetlab_process::path::RasterSpec;
-    use bonnetlab_process::recipe::TifSource;
-    use bonnetlab_process::simulate::ToolModel;
-    use bonnetlab_process::tif::bonnet::BonnetTifParams;
-    use bonnetlab_process::Grid;
-    use bonnetlab_vibration::coupling::{predict, CouplingInput, CouplingOptions};
-    use bonnetlab_vibration::params::{Bonnet, VibrationParams};
+    use bonnetlab::pipeline::msf_prediction::prediction_case;
+    use bonnetlab_vibration::coupling::{predict, CouplingOptions};
+    use bonnetlab_vibration::params::Bonnet;
 
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
     let j: serde_json::Value = serde_json::from_str(
@@ -167,27 +163,10 @@ fn predicted_msf_equals_the_vibration_crate() {
     assert_eq!(preds[0]["bonnet"], "original");
     assert_eq!(preds[1]["bonnet"], "suppression");
 
-    let grid = Grid::new(250, 250, 0.4, 0.4, 0.2, 0.2).unwrap();
-    let tool = ToolModel::from_source(
-        &TifSource::Bonnet(BonnetTifParams::paper(10.0)),
-        None,
-        0.4,
-        0.4,
-    )
-    .unwrap();
-    let path = RasterSpec::over_rect((0.0, 100.0), (0.0, 100.0), 3.0, 1.6)
-        .generate()
-        .unwrap();
-    let params =
-        VibrationParams::from_parts(None, Some(1000.0), Some(0.6), Some(0.25), None).unwrap();
-    let input = CouplingInput {
-        grid,
-        valid: None,
-        tool: &tool,
-        path: &path,
-        params: &params,
-        pitch_mm: Some(3.0),
-    };
+    // The run the pipeline predicts for; its fields are checked against the report's `run`
+    // below, so a change to the case that the report does not say fails here.
+    let case = prediction_case().unwrap();
+    let input = case.input();
     let opts = CouplingOptions::default();
     let close = |a: f64, b: f64, what: &str| {
         assert!(
@@ -202,6 +181,12 @@ fn predicted_msf_equals_the_vibration_crate() {
         assert_eq!(run["precession_deg"].as_f64(), Some(20.0));
         assert_eq!(run["inner_pressure_mpa"].as_f64(), Some(0.25));
         assert_eq!(run["pitch_mm"].as_f64(), Some(3.0));
+        assert_eq!(run["pitch_mm"].as_f64(), Some(case.pitch_mm));
+        assert_eq!(run["rows"].as_u64(), Some(case.grid.rows as u64));
+        assert_eq!(run["cols"].as_u64(), Some(case.grid.cols as u64));
+        assert_eq!(run["dx_mm"].as_f64(), Some(case.grid.dx_mm));
+        assert_eq!(run["dy_mm"].as_f64(), Some(case.grid.dy_mm));
+        assert_eq!(run["spindle_rpm"].as_f64(), Some(case.params.spindle_rpm));
         let lib = predict(&input, bonnet, &opts).unwrap();
         let mechs = p["mechanisms"].as_array().unwrap();
         assert_eq!(mechs.len(), lib.mechanisms.len());

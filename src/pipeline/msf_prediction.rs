@@ -8,13 +8,11 @@
 
 use serde::Serialize;
 
-use bonnetlab_process::path::RasterSpec;
 use bonnetlab_process::recipe::TifSource;
-use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::tif::bonnet::BonnetTifParams;
-use bonnetlab_process::Grid;
 use bonnetlab_vibration::coupling::predict::{BonnetPrediction, MechanismResult};
-use bonnetlab_vibration::coupling::{predict_both, CouplingInput, CouplingOptions};
+use bonnetlab_vibration::coupling::{predict_both, CouplingCase, CouplingOptions};
+use bonnetlab_vibration::error::VibrationError;
 use bonnetlab_vibration::params::VibrationParams;
 
 use super::samples::{SAMPLE_N, SAMPLE_PITCH_MM, SAMPLE_PIXEL_MM};
@@ -104,6 +102,35 @@ pub const PREDICTION_TIF_PEAK_NM_PER_S: f64 = 10.0;
 /// Feed of the prediction's raster, mm/s (the paper's).
 pub const PREDICTION_FEED_MM_PER_S: f64 = 1.6;
 
+/// Inner pressure of the prediction's bonnet, MPa.
+pub const PREDICTION_INNER_PRESSURE_MPA: f64 = 0.25;
+
+/// The prediction's run: the 100 x 100 mm part on the sample's grid, the paper's bonnet TIF,
+/// a 3 mm bidirectional raster at the paper's feed, the vibration crate's defaults at
+/// [`PREDICTION_INNER_PRESSURE_MPA`] with the TIF's spindle speed and offset.
+pub fn prediction_case() -> Result<CouplingCase, VibrationError> {
+    let (n, d) = (SAMPLE_N, SAMPLE_PIXEL_MM);
+    let tif_params = BonnetTifParams::paper(PREDICTION_TIF_PEAK_NM_PER_S);
+    let params = VibrationParams::from_parts(
+        None,
+        Some(tif_params.spindle_rpm),
+        Some(tif_params.offset_mm),
+        Some(PREDICTION_INNER_PRESSURE_MPA),
+        None,
+    )?;
+    CouplingCase::square_raster(
+        &TifSource::Bonnet(tif_params),
+        params,
+        n,
+        d,
+        0.5 * d,
+        n as f64 * d,
+        SAMPLE_PITCH_MM,
+        PREDICTION_FEED_MM_PER_S,
+        0.0,
+    )
+}
+
 /// The vibration coupling for both bonnets on a run matching the sample: the 100 x 100 mm part
 /// on the sample's grid, the paper's bonnet TIF (R 20 mm, offset 0.6 mm, precession 20 deg,
 /// 1000 rpm), a 3 mm bidirectional raster and the vibration crate's defaults at 0.25 MPa.
@@ -112,37 +139,12 @@ pub fn predicted_msf() -> Result<Vec<PredictedMsf>, Error> {
         code: 1,
         message: format!("demo: predicted MSF: {e}"),
     };
+    let case = prediction_case().map_err(|e| perr(&e))?;
     let (n, d) = (SAMPLE_N, SAMPLE_PIXEL_MM);
     let part_mm = n as f64 * d;
-    let grid = Grid::new(n, n, d, d, 0.5 * d, 0.5 * d).map_err(|e| perr(&e))?;
     let tif_params = BonnetTifParams::paper(PREDICTION_TIF_PEAK_NM_PER_S);
-    let tool = ToolModel::from_source(&TifSource::Bonnet(tif_params.clone()), None, d, d)
-        .map_err(|e| perr(&e))?;
-    let path = RasterSpec::over_rect(
-        (0.0, part_mm),
-        (0.0, part_mm),
-        SAMPLE_PITCH_MM,
-        PREDICTION_FEED_MM_PER_S,
-    )
-    .generate()
-    .map_err(|e| perr(&e))?;
-    let inner_pressure_mpa = 0.25;
-    let params = VibrationParams::from_parts(
-        None,
-        Some(tif_params.spindle_rpm),
-        Some(tif_params.offset_mm),
-        Some(inner_pressure_mpa),
-        None,
-    )
-    .map_err(|e| perr(&e))?;
-    let input = CouplingInput {
-        grid,
-        valid: None,
-        tool: &tool,
-        path: &path,
-        params: &params,
-        pitch_mm: Some(SAMPLE_PITCH_MM),
-    };
+    let inner_pressure_mpa = PREDICTION_INNER_PRESSURE_MPA;
+    let input = case.input();
     let opts = CouplingOptions::default();
     let preds = predict_both(&input, &opts).map_err(|e| perr(&e))?;
     let run = PredictionRun {

@@ -1,37 +1,20 @@
 //! Stage timings of the fast coupling on the bench case (100 x 100 mm at 0.1 mm, 60-min raster,
 //! 1 kHz): `cargo run --release -p bonnetlab-vibration --example profile_coupling`.
 
-use bonnetlab_process::path::RasterSpec;
 use bonnetlab_process::perturb::{DerivativeKernels, WeightedDwell};
-use bonnetlab_process::recipe::TifSource;
-use bonnetlab_process::simulate::ToolModel;
-use bonnetlab_process::tif::GaussianTif;
-use bonnetlab_process::Grid;
 use bonnetlab_vibration::coupling::fast::{axis, executed_path, offset_tif};
 use bonnetlab_vibration::coupling::stream::SampleStream;
-use bonnetlab_vibration::coupling::{fast_maps, CouplingInput, CouplingOptions, Mechanisms};
-use bonnetlab_vibration::params::{Bonnet, VibrationParams};
+use bonnetlab_vibration::coupling::{fast_maps, CouplingCase, CouplingOptions, Mechanisms};
+use bonnetlab_vibration::params::Bonnet;
 use std::time::Instant;
 
 fn main() {
-    let grid = Grid::new(1001, 1001, 0.1, 0.1, 0.0, 0.0).expect("grid");
-    let tif = GaussianTif::new(2.0, 10.0, 10.0).expect("tif");
-    let tool = ToolModel::from_source(&TifSource::Gaussian(tif), None, 0.1, 0.1).expect("tool");
-    let mut spec = RasterSpec::over_rect((0.0, 100.0), (0.0, 100.0), 3.0, 1.16);
-    spec.overtravel_mm = 10.0;
-    let path = spec.generate().expect("path");
-    let params = VibrationParams::default();
-    let input = CouplingInput {
-        grid,
-        valid: None,
-        tool: &tool,
-        path: &path,
-        params: &params,
-        pitch_mm: Some(3.0),
-    };
+    let case = CouplingCase::bench_100mm().expect("bench case");
+    let tif = CouplingCase::bench_tif().expect("tif");
+    let (grid, params, input) = (case.grid, &case.params, case.input());
     let opts = CouplingOptions::default();
     let t = Instant::now();
-    let inst = offset_tif(&tif, &params);
+    let inst = offset_tif(&tif, params);
     let k = DerivativeKernels::sample(&inst, 0.1, 0.1, axis(params.lateral_axis));
     eprintln!("kernels {:?} ({:?})", t.elapsed(), k.kh.dim());
     let t = Instant::now();
@@ -40,15 +23,8 @@ fn main() {
     let t = Instant::now();
     let mut n = 0usize;
     let mut acc = 0.0;
-    for s in SampleStream::new(
-        &exec,
-        &params,
-        Bonnet::Original,
-        &Mechanisms::ALL,
-        1000.0,
-        1,
-    )
-    .expect("stream")
+    for s in SampleStream::new(&exec, params, Bonnet::Original, &Mechanisms::ALL, 1000.0, 1)
+        .expect("stream")
     {
         n += 1;
         acc += s.u_mm;
@@ -57,15 +33,8 @@ fn main() {
     let t = Instant::now();
     let ext = grid.grown(k.half.0, k.half.1);
     let mut c8 = WeightedDwell::<8>::new(ext);
-    for s in SampleStream::new(
-        &exec,
-        &params,
-        Bonnet::Original,
-        &Mechanisms::ALL,
-        1000.0,
-        1,
-    )
-    .expect("stream")
+    for s in SampleStream::new(&exec, params, Bonnet::Original, &Mechanisms::ALL, 1000.0, 1)
+        .expect("stream")
     {
         c8.add(s.x_mm, s.y_mm, s.dt_s, &[s.u_mm; 8]);
     }

@@ -22,6 +22,7 @@
 //! the maps into the numbers `simulate` reports (MSF band RMS along Y per mechanism, shares,
 //! Y ripple σ1) and runs the spindle-speed sweep.
 
+pub mod case;
 pub mod direct;
 pub mod fast;
 pub mod predict;
@@ -33,6 +34,7 @@ use bonnetlab_process::{Grid, PathLog};
 use ndarray::Array2;
 use serde::Serialize;
 
+pub use case::CouplingCase;
 pub use direct::{direct_removal, direct_removal_with, Vibrating};
 pub use fast::fast_maps;
 pub use predict::{
