@@ -15,8 +15,8 @@
 //! `--signal` (a diagnostic, logged per run on stderr, not tabulated): the injected effect's
 //! identifiable signal, i.e. the effect run's after map minus its twin's without the effect (same
 //! seed: same part, noise and dropouts) with the baseline columns (rate scale, piston, tilt)
-//! projected out, as an RMS and over the true floor; the share of it the kind's linearised
-//! candidate column(s) explain and the parameters implied by that column on the run's own
+//! projected out, as an RMS and over the true floor (every kind but null and registration);
+//! for library kinds, the share of it the kind's linearised candidate column(s) explain and the parameters implied by that column on the run's own
 //! removal; and the first round's held-out z of the kind's candidate and of the best ones.
 //!
 //! Runs (scenario r of a given seed is the same for every kind, so kinds are comparable and
@@ -558,7 +558,7 @@ fn main() {
                     continue;
                 }
             };
-            if args.signal && LIBRARY.contains(&kind.as_str()) && kind != "registration" {
+            if args.signal && kind != "null" && kind != "registration" {
                 let mut twin = cfg.clone();
                 twin.effects.clear();
                 match generate(&twin) {
