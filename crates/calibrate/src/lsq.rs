@@ -35,6 +35,21 @@ pub fn products(
     picked: Option<&[usize]>,
     init: f64,
 ) -> Vec<Vec<f64>> {
+    products_from(rows, targets, w, picked, init, |r| r)
+}
+
+/// [`products`] for the targets `t >= first(r)` of each row `r` (entries `t < first(r)` stay
+/// `init`): `first = |_| 0` gives every product of every row with every target (a rectangular
+/// block, e.g. the cross terms of new columns with unchanged ones). Each entry is the same
+/// sequential sum as in [`products`].
+pub fn products_from(
+    rows: &[&[f64]],
+    targets: &[&[f64]],
+    w: &[f64],
+    picked: Option<&[usize]>,
+    init: f64,
+    first: impl Fn(usize) -> usize,
+) -> Vec<Vec<f64>> {
     let nt = targets.len();
     let mut acc = vec![vec![init; nt]; rows.len()];
     let total = picked.map_or(w.len(), |p| p.len());
@@ -66,6 +81,9 @@ pub fn products(
             None => (targets.iter().map(|t| &t[lo..hi]).collect(), &w[lo..hi]),
         };
         for (r, row) in acc.iter_mut().enumerate() {
+            if first(r) >= nt {
+                continue;
+            }
             let x: &[f64] = match picked {
                 Some(p) => {
                     gather(&mut xbuf[..nb], rows[r], p);
@@ -77,7 +95,7 @@ pub fn products(
                 *d = wi * xi;
             }
             let wx = &wx[..nb];
-            let mut t = r;
+            let mut t = first(r);
             while t + 8 <= nt {
                 add_products::<8>(row, t, &cols, wx);
                 t += 8;
@@ -238,6 +256,30 @@ mod tests {
                     }
                     assert_eq!(r[a].to_bits(), e.to_bits(), "n {n} rhs {a}");
                 }
+            }
+        }
+    }
+
+    /// A rectangular block (`products_from` with every row starting at target 0, unit
+    /// weights, from -0.0) is the plain `Iterator::sum` of the products to the bit.
+    #[test]
+    fn rectangular_products_are_the_plain_sums() {
+        let len = 2 * BLOCK + 31;
+        let col = |k: usize| -> Vec<f64> {
+            (0..len)
+                .map(|i| ((i * (2 * k + 3) + k) % 97) as f64 * 0.37 - 17.0 + 1e-3 * i as f64)
+                .collect()
+        };
+        let rows: Vec<Vec<f64>> = (0..5).map(col).collect();
+        let targets: Vec<Vec<f64>> = (5..14).map(col).collect();
+        let r: Vec<&[f64]> = rows.iter().map(|c| c.as_slice()).collect();
+        let t: Vec<&[f64]> = targets.iter().map(|c| c.as_slice()).collect();
+        let ones = vec![1.0; len];
+        let x = products_from(&r, &t, &ones, None, -0.0, |_| 0);
+        for (a, ra) in r.iter().enumerate() {
+            for (b, tb) in t.iter().enumerate() {
+                let e: f64 = ra.iter().zip(tb.iter()).map(|(p, q)| p * q).sum();
+                assert_eq!(x[a][b].to_bits(), e.to_bits(), "({a}, {b})");
             }
         }
     }

@@ -595,22 +595,21 @@ pub fn evaluate(
         }
     }
     let (after_res, after_res_valid) = p.resample_after(reg);
-    let before_s = p
-        .before
-        .as_slice()
-        .map(|s| s.to_vec())
-        .unwrap_or_else(|| p.before.iter().cloned().collect());
-    let ar = after_res
-        .as_slice()
-        .map(|s| s.to_vec())
-        .unwrap_or_else(|| after_res.iter().cloned().collect());
-    let av: Vec<bool> = after_res_valid.iter().cloned().collect();
+    // Row-major views of the maps (copied only if a map is not contiguous).
+    fn flat<T: Clone>(a: &Array2<T>) -> std::borrow::Cow<'_, [T]> {
+        match a.as_slice() {
+            Some(s) => std::borrow::Cow::Borrowed(s),
+            None => std::borrow::Cow::Owned(a.iter().cloned().collect()),
+        }
+    }
+    let (before_s, ar, av) = (flat(&p.before), flat(&after_res), flat(&after_res_valid));
     let m: Vec<f64> = p.idx.iter().map(|&k| before_s[k] - ar[k]).collect();
     let w: Vec<f64> = p
         .idx
         .iter()
         .map(|&k| if av[k] { 1.0 } else { 0.0 })
         .collect();
+    drop((before_s, ar, av));
 
     if let Some(prev) = reuse {
         if prev.path_key == key {
@@ -722,21 +721,34 @@ pub fn fit(ev: &Eval, extra: &[Vec<f64>]) -> Result<Fit, CalibrateError> {
     let (g, r) = lsq::gram(&cols, &ev.m, &ev.w, None);
     let coef = lsq::solve(&g, &r)
         .ok_or_else(|| CalibrateError::Processing("singular least-squares fit".into()))?;
+    // Per pixel: `pred = sum_a coef_a col_a[i]` (columns in order, from 0.0), `resid = m -
+    // pred`, `rss += resid^2` in ascending pixel order; the predictions are formed over blocks
+    // of pixels column by column (contiguous reads), each the same sequential sum.
+    const BLOCK: usize = 512;
     let mut resid = ev.m.clone();
     let mut rss = 0.0;
     let mut n = 0.0;
-    for i in 0..resid.len() {
-        if ev.w[i] > 0.0 {
-            let mut pred = 0.0;
-            for (c, col) in coef.iter().zip(&cols) {
-                pred += c * col[i];
+    let mut pred = [0.0f64; BLOCK];
+    let mut lo = 0;
+    while lo < resid.len() {
+        let hi = (lo + BLOCK).min(resid.len());
+        let pred = &mut pred[..hi - lo];
+        pred.fill(0.0);
+        for (c, col) in coef.iter().zip(&cols) {
+            for (p, v) in pred.iter_mut().zip(&col[lo..hi]) {
+                *p += c * v;
             }
-            resid[i] -= pred;
-            rss += resid[i] * resid[i];
-            n += 1.0;
-        } else {
-            resid[i] = 0.0;
         }
+        for ((r, w), p) in resid[lo..hi].iter_mut().zip(&ev.w[lo..hi]).zip(pred.iter()) {
+            if *w > 0.0 {
+                *r -= p;
+                rss += *r * *r;
+                n += 1.0;
+            } else {
+                *r = 0.0;
+            }
+        }
+        lo = hi;
     }
     Ok(Fit {
         coef,

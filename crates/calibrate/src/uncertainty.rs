@@ -65,12 +65,15 @@ pub fn uncertainties_and_correlations(
         .chain(nl_cols.iter().map(|c| c.as_slice()))
         .collect();
     let n = all.len();
+    // `J^T J` (upper triangle by blocked sums: each entry the sequential sum of `x_i y_i`
+    // from -0.0, as `Iterator::sum` forms it; unit weights leave every product exact).
+    let ones = vec![1.0; f.resid.len()];
+    let upper = crate::lsq::products(&all, &all, &ones, None, -0.0);
     let mut jtj = vec![vec![0.0; n]; n];
     for a in 0..n {
         for b in a..n {
-            let s: f64 = all[a].iter().zip(all[b]).map(|(x, y)| x * y).sum();
-            jtj[a][b] = s;
-            jtj[b][a] = s;
+            jtj[a][b] = upper[a][b];
+            jtj[b][a] = upper[a][b];
         }
     }
     let cov = crate::lsq::inverse(&jtj)
@@ -196,9 +199,14 @@ fn registration_systematic(
             }
         })
         .collect();
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let m = nalgebra::DMatrix::from_fn(n, n, |a, b| dot(j2[a], cols[b]));
-    let rhs = nalgebra::DVector::from_fn(n, |a, _| dot(j2[a], resid));
+    // Every `j2[a] . cols[b]` and `j2[a] . resid` by blocked sums (each the sequential sum of
+    // `x_i y_i` from -0.0, as `Iterator::sum` forms it; unit weights leave the products exact).
+    let mut targets = cols.to_vec();
+    targets.push(resid);
+    let ones = vec![1.0; resid.len()];
+    let x = crate::lsq::products_from(&j2, &targets, &ones, None, -0.0, |_| 0);
+    let m = nalgebra::DMatrix::from_fn(n, n, |a, b| x[a][b]);
+    let rhs = nalgebra::DVector::from_fn(n, |a, _| x[a][n]);
     let d = m.lu().solve(&rhs)?;
     d.iter()
         .all(|v| v.is_finite())

@@ -584,19 +584,31 @@ fn splitmix(x: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// Sum over a basis' columns of the squared projection of the residual (matched filter `h`,
-/// per sample) on the column's dwell-centred rate weights.
-fn projection(sh: &Shape, h: &[f64], dt: &[f64]) -> f64 {
-    let hs: f64 = h.iter().sum();
+/// For each matched filter `h` of `hs` (per sample): the sum over a basis' columns of the
+/// squared projection of the residual on the column's dwell-centred rate weights. One pass
+/// over each column serves every `h`; each sum is the sequential one from -0.0 (as
+/// `Iterator::sum` forms it) of the per-filter computation.
+fn projections(sh: &Shape, hs: &[&[f64]], dt: &[f64]) -> Vec<f64> {
+    let sums: Vec<f64> = hs.iter().map(|h| h.iter().sum::<f64>()).collect();
     let w: f64 = dt.iter().sum();
-    sh.cols
-        .iter()
-        .map(|(_, g)| {
-            let m = g.iter().zip(dt).map(|(a, b)| a * b).sum::<f64>() / w.max(1e-300);
-            let b = g.iter().zip(h).map(|(a, b)| a * b).sum::<f64>() - m * hs;
-            b * b
-        })
-        .sum()
+    let mut out = vec![-0.0; hs.len()];
+    let mut dots = vec![-0.0; hs.len()];
+    for (_, g) in &sh.cols {
+        let mut gd = -0.0;
+        dots.fill(-0.0);
+        for (i, (&a, &t)) in g.iter().zip(dt).enumerate() {
+            gd += a * t;
+            for (d, h) in dots.iter_mut().zip(hs) {
+                *d += a * h[i];
+            }
+        }
+        let m = gd / w.max(1e-300);
+        for ((o, d), s) in out.iter_mut().zip(&dots).zip(&sums) {
+            let b = d - m * s;
+            *o += b * b;
+        }
+    }
+    out
 }
 
 /// Whether a fallback's held-out score clears the stricter bar (see the module note).
@@ -634,11 +646,11 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
             let Some((obs, null)) = &flips else {
                 return true;
             };
-            let t = projection(sh, obs, &p.samples.dt_s);
-            let mut tn: Vec<f64> = null
-                .iter()
-                .map(|h| projection(sh, h, &p.samples.dt_s))
+            let all: Vec<&[f64]> = std::iter::once(obs.as_slice())
+                .chain(null.iter().map(|h| h.as_slice()))
                 .collect();
+            let mut tn = projections(sh, &all, &p.samples.dt_s);
+            let t = tn.remove(0);
             tn.sort_by(|a, b| a.total_cmp(b));
             let med = tn[tn.len() / 2];
             if trace {
