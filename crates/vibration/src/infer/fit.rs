@@ -38,6 +38,13 @@ pub const DCHI2_95: f64 = 3.841_458_820_694_124;
 /// Δχ² of a one-sided 95 % upper bound of one parameter.
 pub const DCHI2_95_ONE_SIDED: f64 = 2.705_543_454_095_404;
 
+/// Width of the spindle-harmonic imprint band below the imprint's peak PSD, dB.
+pub const IMPRINT_BAND_DB: f64 = 20.0;
+/// Rate-scale bins: where the commanded path's removal PSD is within this of its peak, dB.
+pub const SCALE_BINS_DB: f64 = 20.0;
+/// Least width of each flank of the imprint band, bins.
+pub const MIN_FLANK_BINS: usize = 4;
+
 /// Search ranges of the forcing fit.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct InferOptions {
@@ -178,6 +185,65 @@ impl SpectralModel {
         })
     }
 
+    /// The spindle-harmonic imprint band of the X (scan) axis: the unbiased X bins where the
+    /// PSD of the removal's linear response to the forcing (`Q_11`, nm² mm per N²) is within
+    /// [`IMPRINT_BAND_DB`] of its peak, as (first, last) bin; None when the model has no imprint
+    /// (the harmonics fall beyond Nyquist).
+    pub fn imprint_band(&self) -> Option<(usize, usize)> {
+        let ax = &self.axes[0];
+        let lin = |b: usize| ax.q[b][N_MONO + 1];
+        let from = ax.first.max(1);
+        let peak = (from..ax.freq.len()).map(lin).fold(0.0, f64::max);
+        if !(peak > 0.0 && peak.is_finite()) {
+            return None;
+        }
+        let level = peak * 10f64.powf(-IMPRINT_BAND_DB / 10.0);
+        let inside: Vec<usize> = (from..ax.freq.len()).filter(|&b| lin(b) >= level).collect();
+        Some((*inside.first()?, *inside.last()?))
+    }
+
+    /// Bins of the fit as (axis, bin), axis 0 = X, and how many of them lead as rate-scale
+    /// bins. With an imprint band: first the bins of both axes where the commanded path's
+    /// removal (`Q_00`) is within [`SCALE_BINS_DB`] of its peak on that axis (the raster ripple
+    /// and the part-scale figure: they fix the removal-rate scale, far above any noise), then
+    /// the X bins of the imprint band with a flank on each side as wide as the band (at least
+    /// [`MIN_FLANK_BINS`]): the flanks fix the flat local background (measurement noise,
+    /// texture, path errors the model does not have), the band the forcing. Without an imprint
+    /// band: every unbiased bin of both axes, none leading (the scale and a white level are
+    /// fitted over all of them).
+    fn fit_bins(&self) -> (Vec<(usize, usize)>, Option<usize>) {
+        let Some((lo, hi)) = self.imprint_band() else {
+            let mut all = Vec::new();
+            for (a, ax) in self.axes.iter().enumerate() {
+                all.extend((ax.first.max(1)..ax.freq.len()).map(|b| (a, b)));
+            }
+            return (all, None);
+        };
+        let mut bins = Vec::new();
+        for (a, ax) in self.axes.iter().enumerate() {
+            let from = ax.first.max(1);
+            let base = |b: usize| ax.q[b][0];
+            let peak = (from..ax.freq.len()).map(base).fold(0.0, f64::max);
+            let level = peak * 10f64.powf(-SCALE_BINS_DB / 10.0);
+            bins.extend(
+                (from..ax.freq.len())
+                    .filter(|&b| peak > 0.0 && base(b) >= level)
+                    .map(|b| (a, b)),
+            );
+        }
+        let n_scale = bins.len();
+        let x = &self.axes[0];
+        let flank = (hi - lo).max(MIN_FLANK_BINS);
+        let from = lo.saturating_sub(flank).max(x.first.max(1));
+        let to = (hi + flank).min(x.freq.len() - 1);
+        for b in from..=to {
+            if !bins[..n_scale].contains(&(0, b)) {
+                bins.push((0, b));
+            }
+        }
+        (bins, Some(n_scale))
+    }
+
     /// Model PSD of the removal (no scale, no noise) at forcing (F, S): X bins then Y bins.
     fn removal_psd(&self, fn_n: f64, noise_n: f64, bins: &[(usize, usize)], out: &mut Vec<f64>) {
         let w = monomials(fn_n, noise_n);
@@ -279,6 +345,39 @@ fn fit_scale_noise(meas: &[f64], model: &[f64], white: &[f64]) -> (f64, f64, f64
             let p = (a * model[i] + b * white[i]).max(1e-300);
             wgt[i] = 1.0 / (p * p);
         }
+    }
+    (ssr_log(meas, model, white, a, b), a, b)
+}
+
+/// The fit with an imprint band: the rate scale a from the first `n_scale` bins (below the
+/// band, where the removal is the commanded path's: ln a = mean of ln(P / M) there), then the
+/// flat background b ≥ 0 from the band and its flanks by an iteratively reweighted fit of
+/// P ≈ a M + b W in ln P with a held; returns (SSR over all bins, a, b).
+fn fit_scale_then_background(
+    meas: &[f64],
+    model: &[f64],
+    white: &[f64],
+    n_scale: usize,
+) -> (f64, f64, f64) {
+    let logs: Vec<f64> = (0..n_scale)
+        .filter(|&i| model[i] > 0.0)
+        .map(|i| (meas[i] / model[i]).ln())
+        .collect();
+    let a = if logs.is_empty() {
+        0.0
+    } else {
+        (logs.iter().sum::<f64>() / logs.len() as f64).exp()
+    };
+    let mut b = 0.0;
+    for _ in 0..6 {
+        let (mut sww, mut swr) = (0.0, 0.0);
+        for i in n_scale..meas.len() {
+            let q = (a * model[i] + b * white[i]).max(meas[i] * 1e-6);
+            let w = 1.0 / (q * q);
+            sww += w * white[i] * white[i];
+            swr += w * white[i] * (meas[i] - a * model[i]);
+        }
+        b = if sww > 0.0 { (swr / sww).max(0.0) } else { 0.0 };
     }
     (ssr_log(meas, model, white, a, b), a, b)
 }
@@ -422,19 +521,23 @@ pub fn infer_forcing(
     let mut bins = Vec::new();
     let mut meas = Vec::new();
     let mut white = Vec::new();
-    for (a, ax) in spec.axes.iter().enumerate() {
-        let m = meas_axes[a];
-        for b in ax.first.max(1)..ax.freq.len() {
-            let f = ax.freq[b];
-            let p = m.psd_nm2_mm[b];
-            if f >= opts.band_per_mm.0 && f <= opts.band_per_mm.1 && p > 0.0 && p.is_finite() {
-                bins.push((a, b));
-                meas.push(p);
-                white.push(ax.white);
+    let (candidates, n_lead) = spec.fit_bins();
+    let mut n_scale = n_lead.map(|_| 0);
+    for (i, &(a, b)) in candidates.iter().enumerate() {
+        let f = spec.axes[a].freq[b];
+        let p = meas_axes[a].psd_nm2_mm[b];
+        if f >= opts.band_per_mm.0 && f <= opts.band_per_mm.1 && p > 0.0 && p.is_finite() {
+            bins.push((a, b));
+            meas.push(p);
+            white.push(spec.axes[a].white);
+            if let (Some(n), Some(lead)) = (n_scale.as_mut(), n_lead) {
+                if i < lead {
+                    *n += 1;
+                }
             }
         }
     }
-    if bins.len() < 8 {
+    if bins.len() < 8 || n_scale == Some(0) {
         return Err(VibrationError::InvalidArgument(format!(
             "only {} PSD bins in the fit band: the map is too small",
             bins.len()
@@ -453,7 +556,10 @@ pub fn infer_forcing(
     for (i, &f) in fn_grid.iter().enumerate() {
         for (j, &s) in noise_grid.iter().enumerate() {
             spec.removal_psd(f, s, &bins, &mut buf);
-            let (r, a, b) = fit_scale_noise(&meas, &buf, &white);
+            let (r, a, b) = match n_scale {
+                Some(n) => fit_scale_then_background(&meas, &buf, &white, n),
+                None => fit_scale_noise(&meas, &buf, &white),
+            };
             ssr[i * noise_grid.len() + j] = r;
             scale[i * noise_grid.len() + j] = (a, b);
         }
