@@ -336,13 +336,48 @@ fn at_recipe_when_unconstrained(mut fit: ForcingFit, recipe: &VibrationParams) -
     fit
 }
 
+/// Effects of a calibration that the forcing model already accounts for: the TIF scale (the
+/// model is rebuilt with it, and the fit's free rate scale takes what is left) and the
+/// registration (the after map is resampled through it).
+const MODELLED_EFFECTS: [&str; 2] = ["tif_scale", "registration"];
+
+/// The measured removal without the removal the calibration's other accepted effects add
+/// (their [`bonnetlab_calibrate::run::Maps::effect_removal_nm`]), on the pixels the calibration
+/// fitted (the effect maps are zero elsewhere); `removal` unchanged when no such effect was
+/// accepted.
+fn without_unmodelled_effects(
+    removal: &Surface,
+    cal: &Calibration,
+) -> Result<Surface, bonnetlab_surface::SurfaceError> {
+    let added: Vec<&Array2<f64>> = cal
+        .maps
+        .effect_removal_nm
+        .iter()
+        .filter(|(kind, _)| !MODELLED_EFFECTS.contains(&kind.as_str()))
+        .map(|(_, m)| m)
+        .collect();
+    let fitted = cal.maps.final_residual_nm.as_ref().map(|(_, m)| m);
+    let (Some(fitted), false) = (fitted, added.is_empty()) else {
+        return Ok(removal.clone());
+    };
+    let mut z = removal.heights_nm().clone();
+    for m in added {
+        z -= m;
+    }
+    let valid = ndarray::Zip::from(removal.valid())
+        .and(fitted)
+        .map_collect(|&a, &b| a && b);
+    Surface::with_mask(z, valid, removal.dx_mm, removal.dy_mm)
+}
+
 /// Analyses one run.
 ///
 /// Calibration does not model vibration: given the raw maps it explains the spindle imprint
 /// with aliases (a rate oscillation at the spindle period, path errors at the pitch). So the
 /// forcing is fitted first (recipe TIF, unregistered maps), the run is calibrated with the
 /// vibration's removal at that forcing taken back (`after + induced`), and the forcing refitted
-/// on the calibrated TIF and registered after map; when the calibrated TIF scale moved by more
+/// on the calibrated TIF and registered after map, with the removal of the calibration's other
+/// accepted effects (path and rate effects the forcing model does not have) taken out; when the calibrated TIF scale moved by more
 /// than 0.5 %, once more (at most two calibrations).
 pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, BonnetsError> {
     let file = run.recipe_file.as_path();
@@ -465,9 +500,11 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
             Some(a) => common(a)?,
             None => (before0.clone(), after0.clone(), removal0.clone()),
         };
-        if moved || after_reg.is_some() {
-            fit = infer_forcing(&model, &maps.2, &opts.infer).map_err(|e| perr(&e))?;
-        }
+        // The forcing model is the commanded path's: the run's calibrated path and rate effects
+        // (a servo lag, a path offset, rate drifts) are not in it, and left in the removal
+        // their spectrum is read as forcing. They are taken out before the refit.
+        let target = without_unmodelled_effects(&maps.2, &cal).map_err(|e| perr(&e))?;
+        fit = infer_forcing(&model, &target, &opts.infer).map_err(|e| perr(&e))?;
         state = Some((cal, maps));
         if !moved {
             break;

@@ -349,8 +349,8 @@ fn fit_scale_noise(meas: &[f64], model: &[f64], white: &[f64]) -> (f64, f64, f64
     (ssr_log(meas, model, white, a, b), a, b)
 }
 
-/// The fit with an imprint band: the rate scale a from the first `n_scale` bins (below the
-/// band, where the removal is the commanded path's: ln a = mean of ln(P / M) there), then the
+/// The fit with an imprint band: the rate scale a from the first `n_scale` bins (where the
+/// commanded path's removal dominates; a white level is fitted with it there), then the
 /// flat background b ≥ 0 from the band and its flanks by an iteratively reweighted fit of
 /// P ≈ a M + b W in ln P with a held; returns (SSR over all bins, a, b).
 fn fit_scale_then_background(
@@ -359,15 +359,7 @@ fn fit_scale_then_background(
     white: &[f64],
     n_scale: usize,
 ) -> (f64, f64, f64) {
-    let logs: Vec<f64> = (0..n_scale)
-        .filter(|&i| model[i] > 0.0)
-        .map(|i| (meas[i] / model[i]).ln())
-        .collect();
-    let a = if logs.is_empty() {
-        0.0
-    } else {
-        (logs.iter().sum::<f64>() / logs.len() as f64).exp()
-    };
+    let (_, a, _) = fit_scale_noise(&meas[..n_scale], &model[..n_scale], &white[..n_scale]);
     let mut b = 0.0;
     for _ in 0..6 {
         let (mut sww, mut swr) = (0.0, 0.0);
@@ -550,20 +542,12 @@ pub fn infer_forcing(
     }
     let fn_grid = grid(opts.fn_max_n, opts.fn_steps);
     let noise_grid = grid(opts.noise_max_n, opts.noise_steps);
-    let mut ssr = vec![0.0; fn_grid.len() * noise_grid.len()];
-    let mut scale = vec![(0.0, 0.0); ssr.len()];
-    let mut buf = Vec::with_capacity(bins.len());
-    for (i, &f) in fn_grid.iter().enumerate() {
-        for (j, &s) in noise_grid.iter().enumerate() {
-            spec.removal_psd(f, s, &bins, &mut buf);
-            let (r, a, b) = match n_scale {
-                Some(n) => fit_scale_then_background(&meas, &buf, &white, n),
-                None => fit_scale_noise(&meas, &buf, &white),
-            };
-            ssr[i * noise_grid.len() + j] = r;
-            scale[i * noise_grid.len() + j] = (a, b);
-        }
-    }
+    let (ssr, scale) = grid_fit(
+        &spec,
+        (&bins, &meas, &white, n_scale),
+        &fn_grid,
+        &noise_grid,
+    );
     let (kmin, &ssr_min) =
         ssr.iter().enumerate().fold(
             (0, &f64::INFINITY),
@@ -581,13 +565,46 @@ pub fn infer_forcing(
                 .fold(f64::INFINITY, f64::min))
         })
         .collect();
-    let prof_noise: Vec<f64> = (0..ns)
-        .map(|j| {
-            chi((0..fn_grid.len())
-                .map(|i| ssr[i * ns + j])
-                .fold(f64::INFINITY, f64::min))
-        })
-        .collect();
+    // The broadband force has no band of its own: its imprint is flat along both axes, under
+    // the measurement noise. Its profile comes from every unbiased bin of both axes (a free
+    // rate scale and white level), as the joint fit gives it; the spindle forcing's does not.
+    let prof_noise: Vec<f64> = match n_scale {
+        None => (0..ns)
+            .map(|j| {
+                chi((0..fn_grid.len())
+                    .map(|i| ssr[i * ns + j])
+                    .fold(f64::INFINITY, f64::min))
+            })
+            .collect(),
+        Some(_) => {
+            let (mut fb, mut fm, mut fw) = (Vec::new(), Vec::new(), Vec::new());
+            for (a, ax) in spec.axes.iter().enumerate() {
+                for b in ax.first.max(1)..ax.freq.len() {
+                    let (f, p) = (ax.freq[b], meas_axes[a].psd_nm2_mm[b]);
+                    if f >= opts.band_per_mm.0
+                        && f <= opts.band_per_mm.1
+                        && p > 0.0
+                        && p.is_finite()
+                    {
+                        fb.push((a, b));
+                        fm.push(p);
+                        fw.push(ax.white);
+                    }
+                }
+            }
+            let (full, _) = grid_fit(&spec, (&fb, &fm, &fw, None), &fn_grid, &noise_grid);
+            let min = full.iter().copied().fold(f64::INFINITY, f64::min);
+            let var = (min / (fb.len() as f64 - 4.0).max(1.0)).max(1e-30);
+            (0..ns)
+                .map(|j| {
+                    (0..fn_grid.len())
+                        .map(|i| full[i * ns + j])
+                        .fold(f64::INFINITY, f64::min)
+                        / (var * spec.enbw_bins)
+                })
+                .collect()
+        }
+    };
     let (best_fn, forcing) = verdict(&fn_grid, &prof_fn, &model.params, model.bonnet, "run");
     let (jmin, best_noise) = refine_min(&noise_grid, &prof_noise);
     let nmin = prof_noise[jmin];
@@ -616,6 +633,33 @@ pub fn infer_forcing(
         ssr_grid: ssr,
         params: model.params.clone(),
     })
+}
+
+/// Bins of a fit: (axis, bin), measured PSD, white level, leading rate-scale bins.
+type FitBins<'a> = (&'a [(usize, usize)], &'a [f64], &'a [f64], Option<usize>);
+
+/// SSR of ln P and the fitted (rate scale², white level) on the (fn, noise) grid, fn-major.
+fn grid_fit(
+    spec: &SpectralModel,
+    (bins, meas, white, n_scale): FitBins<'_>,
+    fn_grid: &[f64],
+    noise_grid: &[f64],
+) -> (Vec<f64>, Vec<(f64, f64)>) {
+    let mut ssr = vec![0.0; fn_grid.len() * noise_grid.len()];
+    let mut scale = vec![(0.0, 0.0); ssr.len()];
+    let mut buf = Vec::with_capacity(bins.len());
+    for (i, &f) in fn_grid.iter().enumerate() {
+        for (j, &s) in noise_grid.iter().enumerate() {
+            spec.removal_psd(f, s, bins, &mut buf);
+            let (r, a, b) = match n_scale {
+                Some(n) => fit_scale_then_background(meas, &buf, white, n),
+                None => fit_scale_noise(meas, &buf, white),
+            };
+            ssr[i * noise_grid.len() + j] = r;
+            scale[i * noise_grid.len() + j] = (a, b);
+        }
+    }
+    (ssr, scale)
 }
 
 /// One forcing for several runs (each with its own bonnet damping and series compliance).
