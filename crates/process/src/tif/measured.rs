@@ -28,9 +28,7 @@
 //! 6. Between the spot's pixels ([`Rim`]): by default the fitted bonnet shape, evaluated
 //!    exactly (its square-root rim included, which no interpolation of pixels reproduces), plus
 //!    the measured-minus-fit residual when it stands out of the noise; when the shape does not
-//!    describe the spot (residual above [`FIT_ACCEPT`] of the footprint's RMS or [`FIT_NOISE_ACCEPT`] times the noise) the smooth
-//!    radial shape ([`super::spotfit::SmoothShape`], a generalised Gaussian) on the same terms,
-//!    kept out to where it falls below [`SMOOTH_TAIL`] of its peak; when neither describes it, the pixels
+//!    describe the spot (residual above [`FIT_ACCEPT`] of the footprint's RMS or [`FIT_NOISE_ACCEPT`] times the noise) the pixels
 //!    themselves: band-limited upsampling to a quarter pixel, then Catmull-Rom bicubic over
 //!    valid pixels (invalid ones filled from their neighbours). On the Hertz bonnet of the
 //!    truth suite at the map pixel, interpolation alone misses the ripple sigma_1 by up to 16 %,
@@ -65,12 +63,9 @@ pub enum Rim {
     /// The precessing-bonnet shape fitted to the spot ([`super::spotfit`]) evaluated exactly,
     /// plus the measured-minus-fit residual interpolated when it stands out of the noise
     /// ([`residual_is_significant`]); the fit's centre is the tool centre.
-    /// When the bonnet fit leaves more than [`FIT_ACCEPT`] of the footprint's RMS, or more than
-    /// [`FIT_NOISE_ACCEPT`] times the noise, unexplained (a spot the bonnet model does not
-    /// describe), the smooth radial shape on the same terms (a Gaussian spot sampled at one
-    /// pixel per sigma: removal RMS 0.12 % of the exact deposition where interpolating its
-    /// pixels missed by 1.05 %, truth suite); when that does not describe it either,
-    /// [`Rim::Interpolate`].
+    /// Falls back to [`Rim::Interpolate`] when the fit leaves more than
+    /// [`FIT_ACCEPT`] of the footprint's RMS, or more than [`FIT_NOISE_ACCEPT`] times the noise,
+    /// unexplained (a spot the bonnet model does not describe).
     #[default]
     ModelPlusResidual,
     /// The fitted shape alone (the residual dropped); for comparisons.
@@ -280,14 +275,7 @@ impl MeasuredTif {
                 .or_else(|| {
                     fit_smooth(&rate, valid, dx, dy, start, window)
                         .filter(|f| describes(f.residual_rms, f.data_rms))
-                        .map(|f| {
-                            (
-                                SpotModel::Smooth(f.shape),
-                                f.centre,
-                                f.residual_rms,
-                                f.pixels,
-                            )
-                        })
+                        .map(|f| (SpotModel::Smooth(f.shape), f.centre, f.residual_rms, f.pixels))
                 });
             if let Some((m, centre, residual, pixels)) = fitted {
                 (u0, v0) = centre;

@@ -152,16 +152,7 @@ pub fn fit_shape(
     if !(shape.a_mm > 0.5 * dx.max(dy) && shape.a_mm <= window_mm && shape.peak.is_finite()) {
         return None;
     }
-    Some(fit_result(
-        shape,
-        &pts,
-        start.centre,
-        &p,
-        cost,
-        dx,
-        dy,
-        it0 + it1,
-    ))
+    Some(fit_result(shape, &pts, start.centre, &p, cost, dx, dy, it0 + it1))
 }
 
 /// Fits the [`SmoothShape`] to `rate` (nm/s) like [`fit_shape`] fits the bonnet's: same pixels,
