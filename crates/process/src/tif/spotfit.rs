@@ -14,15 +14,6 @@
 //! Parameters are fitted as (x0, y0, ln peak, ln a, ln gamma, ln b, psi), so the positive ones
 //! stay positive; gamma is bounded to [0.05, 50] (50 makes the shape a Gaussian for all
 //! purposes), b to [0.02 a, 200 a].
-//!
-//! A spot the bonnet shape does not describe (a Gaussian-like spot of an ion beam or of a
-//! bonnet worn smooth: the shape's compact support leaves a residual many times the noise) is
-//! fitted by the smooth radial shape [`SmoothShape`] instead ([`fit_smooth`]),
-//! `peak exp(-(r^2 / (2 sigma^2))^beta)`: a Gaussian at beta = 1, flatter-topped above, more
-//! peaked below. Fitted as (x0, y0, ln peak, ln sigma, ln beta), beta bounded to [0.3, 3].
-//! Why: a spot sampled at about one pixel per sigma (a spot measured on a coarser pixel than
-//! the map) is not band-limited at its pixel, so interpolating its pixels misses the removal
-//! by 1 % (truth suite); the fitted shape, where its residual is within the noise, does not.
 
 use ndarray::Array2;
 use rayon::prelude::*;
@@ -30,11 +21,10 @@ use rayon::prelude::*;
 use super::bonnet::BonnetShape;
 use bonnetlab_surface::lsq::{solve_from_r, StreamingQr};
 
-/// A fitted shape (the bonnet's by default, or a [`SmoothShape`]) with its centre and how well
-/// it fits.
+/// A fitted shape with its centre and how well it fits.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ShapeFit<S = BonnetShape> {
-    pub shape: S,
+pub struct ShapeFit {
+    pub shape: BonnetShape,
     /// Centre (row, column), fractional pixels of the fitted map.
     pub centre: (f64, f64),
     /// RMS of the residual over the fitted pixels, nm/s.
@@ -55,46 +45,11 @@ pub struct FitStart {
     pub a_mm: f64,
 }
 
-/// A smooth radial spot: `peak exp(-(r^2 / (2 sigma^2))^beta)` (see the module docs).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SmoothShape {
-    /// Rate at the centre, nm/s.
-    pub peak: f64,
-    /// Width, mm (the Gaussian's sigma at beta = 1).
-    pub sigma_mm: f64,
-    /// Exponent of the radial profile (1: Gaussian).
-    pub beta: f64,
-}
-
-impl SmoothShape {
-    /// Rate (nm/s) at (x, y) mm from the centre.
-    pub fn rate_at(&self, x: f64, y: f64) -> f64 {
-        let q = (x * x + y * y) / (2.0 * self.sigma_mm * self.sigma_mm);
-        self.peak * (-q.powf(self.beta)).exp()
-    }
-
-    /// Radius (mm) beyond which the rate is below `fraction` (in (0, 1)) of the peak.
-    pub fn radius_below(&self, fraction: f64) -> f64 {
-        self.sigma_mm * (2.0 * (-fraction.ln()).powf(1.0 / self.beta)).sqrt()
-    }
-}
-
-/// Bounds of the smooth shape's exponent.
-const BETA_RANGE: (f64, f64) = (0.3, 3.0);
-
 /// Most pixels a fit evaluates (finer maps are strided evenly).
 const MAX_FIT_PIXELS: usize = 12_000;
 const NP: usize = 7;
 
-fn smooth_of(p: &[f64]) -> SmoothShape {
-    SmoothShape {
-        peak: p[2].exp(),
-        sigma_mm: p[3].exp(),
-        beta: p[4].exp().clamp(BETA_RANGE.0, BETA_RANGE.1),
-    }
-}
-
-fn shape_of(p: &[f64], steps: usize) -> BonnetShape {
+fn shape_of(p: &[f64; NP], steps: usize) -> BonnetShape {
     BonnetShape {
         peak: p[2].exp(),
         a_mm: p[3].exp(),
@@ -117,97 +72,14 @@ pub fn fit_shape(
     window_mm: f64,
     steps: usize,
 ) -> Option<ShapeFit> {
-    let pts = fit_points(rate, use_px, dx, dy, start.centre, window_mm)?;
-    let a0 = start.a_mm.max(2.0 * dx.max(dy));
-    let values = |p: &[f64]| model(&pts, p, steps);
-    let h = [1e-5 * a0, 1e-5 * a0, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6];
-    // Keep a trial inside the plausible region.
-    let clamp = |q: &mut [f64]| {
-        q[4] = q[4].clamp(0.05f64.ln(), 50f64.ln());
-        q[5] = q[5].clamp((0.02 * a0).ln(), (200.0 * a0).ln());
-        q[3] = q[3].min((2.0 * window_mm).ln());
-    };
-    let mut best: Option<(Vec<f64>, f64, usize)> = None;
-    // Three starting exponents (bell, parabolic, Hertz-like): the best converged fit wins.
-    for gamma0 in [0.5, 1.0, 2.0] {
-        let p0 = vec![
-            0.0,
-            0.0,
-            start.peak.max(1e-12).ln(),
-            a0.ln(),
-            f64::ln(gamma0),
-            (2.0 * a0).ln(),
-            0.0,
-        ];
-        if let Some((p, cost, it)) = levenberg_marquardt(&pts, p0, &values, &h, &clamp, 10) {
-            if best.as_ref().is_none_or(|b| cost < b.1) {
-                best = Some((p, cost, it));
-            }
-        }
-    }
-    // The best start carried on to convergence.
-    let (p, _, it0) = best?;
-    let (p, cost, it1) = levenberg_marquardt(&pts, p, &values, &h, &clamp, 60)?;
-    let shape = shape_of(&p, steps);
-    if !(shape.a_mm > 0.5 * dx.max(dy) && shape.a_mm <= window_mm && shape.peak.is_finite()) {
-        return None;
-    }
-    Some(fit_result(shape, &pts, start.centre, &p, cost, dx, dy, it0 + it1))
-}
-
-/// Fits the [`SmoothShape`] to `rate` (nm/s) like [`fit_shape`] fits the bonnet's: same pixels,
-/// window and start. `None` when the fit does not converge to a footprint (non-finite, or a
-/// width outside the window).
-pub fn fit_smooth(
-    rate: &Array2<f64>,
-    use_px: &Array2<bool>,
-    dx: f64,
-    dy: f64,
-    start: FitStart,
-    window_mm: f64,
-) -> Option<ShapeFit<SmoothShape>> {
-    let pts = fit_points(rate, use_px, dx, dy, start.centre, window_mm)?;
-    let a0 = start.a_mm.max(2.0 * dx.max(dy));
-    let values = |p: &[f64]| {
-        let s = smooth_of(p);
-        pts.par_iter()
-            .map(|&(x, y, _)| s.rate_at(x - p[0], y - p[1]))
-            .collect::<Vec<f64>>()
-    };
-    let h = [1e-5 * a0, 1e-5 * a0, 1e-6, 1e-6, 1e-6];
-    let clamp = |q: &mut [f64]| {
-        q[4] = q[4].clamp(BETA_RANGE.0.ln(), BETA_RANGE.1.ln());
-        q[3] = q[3].min((2.0 * window_mm).ln());
-    };
-    // The support is where the spot falls to about 0.5 % of its peak: 3.3 sigma of a Gaussian.
-    let p0 = vec![0.0, 0.0, start.peak.max(1e-12).ln(), (a0 / 3.3).ln(), 0.0];
-    let (p, cost, it) = levenberg_marquardt(&pts, p0, &values, &h, &clamp, 80)?;
-    let shape = smooth_of(&p);
-    if !(shape.sigma_mm > 0.1 * dx.max(dy) && shape.sigma_mm <= window_mm && shape.peak.is_finite())
-    {
-        return None;
-    }
-    Some(fit_result(shape, &pts, start.centre, &p, cost, dx, dy, it))
-}
-
-/// The pixels of a fit as (x, y) mm relative to `centre` (fractional row, column) and their
-/// values: those where `use_px` is true within `window_mm` of it, strided evenly on fine maps.
-/// `None` when there are too few to fit.
-fn fit_points(
-    rate: &Array2<f64>,
-    use_px: &Array2<bool>,
-    dx: f64,
-    dy: f64,
-    centre: (f64, f64),
-    window_mm: f64,
-) -> Option<Vec<(f64, f64, f64)>> {
     let (rows, cols) = rate.dim();
-    let (u0, v0) = centre;
+    let (u0, v0) = start.centre;
     let n_in = {
         let (h0, h1) = (window_mm / dy, window_mm / dx);
         (std::f64::consts::PI * h0 * h1) as usize + 1
     };
     let stride = ((n_in as f64 / MAX_FIT_PIXELS as f64).sqrt().ceil() as usize).max(1);
+    // Pixels of the fit as (x, y) mm relative to the start centre, and their values.
     let mut pts: Vec<(f64, f64, f64)> = Vec::new();
     for i in (0..rows).step_by(stride) {
         for j in (0..cols).step_by(stride) {
@@ -217,36 +89,50 @@ fn fit_points(
             }
         }
     }
-    (pts.len() >= 4 * NP).then_some(pts)
-}
-
-/// The [`ShapeFit`] of converged parameters `p` (whose first two are the centre's x, y offset
-/// in mm from `centre`) with least-squares `cost` over `pts`.
-#[allow(clippy::too_many_arguments)]
-fn fit_result<S>(
-    shape: S,
-    pts: &[(f64, f64, f64)],
-    centre: (f64, f64),
-    p: &[f64],
-    cost: f64,
-    dx: f64,
-    dy: f64,
-    iterations: usize,
-) -> ShapeFit<S> {
+    if pts.len() < 4 * NP {
+        return None;
+    }
+    let a0 = start.a_mm.max(2.0 * dx.max(dy));
+    let mut best: Option<([f64; NP], f64, usize)> = None;
+    // Three starting exponents (bell, parabolic, Hertz-like): the best converged fit wins.
+    for gamma0 in [0.5, 1.0, 2.0] {
+        let p0 = [
+            0.0,
+            0.0,
+            start.peak.max(1e-12).ln(),
+            a0.ln(),
+            f64::ln(gamma0),
+            (2.0 * a0).ln(),
+            0.0,
+        ];
+        if let Some((p, cost, it)) = levenberg_marquardt(&pts, p0, steps, a0, window_mm, 10) {
+            if best.as_ref().is_none_or(|b| cost < b.1) {
+                best = Some((p, cost, it));
+            }
+        }
+    }
+    // The best start carried on to convergence.
+    let (p, _, it0) = best?;
+    let (p, cost, it1) = levenberg_marquardt(&pts, p, steps, a0, window_mm, 60)?;
+    let iterations = it0 + it1;
+    let shape = shape_of(&p, steps);
+    if !(shape.a_mm > 0.5 * dx.max(dy) && shape.a_mm <= window_mm && shape.peak.is_finite()) {
+        return None;
+    }
     let n = pts.len() as f64;
     let data_rms = (pts.iter().map(|q| q.2 * q.2).sum::<f64>() / n).sqrt();
-    ShapeFit {
+    Some(ShapeFit {
         shape,
-        centre: (centre.0 + p[1] / dy, centre.1 + p[0] / dx),
+        centre: (u0 + p[1] / dy, v0 + p[0] / dx),
         residual_rms: (cost / n).sqrt(),
         data_rms,
         pixels: pts.len(),
         iterations,
-    }
+    })
 }
 
 /// Model values at the points for parameters `p`.
-fn model(pts: &[(f64, f64, f64)], p: &[f64], steps: usize) -> Vec<f64> {
+fn model(pts: &[(f64, f64, f64)], p: &[f64; NP], steps: usize) -> Vec<f64> {
     let s = shape_of(p, steps);
     let az = s.azimuths();
     pts.par_iter()
@@ -259,29 +145,27 @@ fn cost_of(pts: &[(f64, f64, f64)], m: &[f64]) -> f64 {
 }
 
 /// Damped Gauss-Newton with a forward-difference Jacobian: (parameters, cost, iterations).
-/// `values` gives the model at the points for parameters `p`, `h` the difference step of each
-/// parameter, `clamp` keeps a trial inside the plausible region.
 fn levenberg_marquardt(
     pts: &[(f64, f64, f64)],
-    mut p: Vec<f64>,
-    values: &dyn Fn(&[f64]) -> Vec<f64>,
-    h: &[f64],
-    clamp: &dyn Fn(&mut [f64]),
+    mut p: [f64; NP],
+    steps: usize,
+    a0: f64,
+    window: f64,
     max_iter: usize,
-) -> Option<(Vec<f64>, f64, usize)> {
-    let np = p.len();
-    let mut m = values(&p);
+) -> Option<([f64; NP], f64, usize)> {
+    let mut m = model(pts, &p, steps);
     let mut cost = cost_of(pts, &m);
     let mut lambda = 1e-3;
     let mut it = 0;
     while it < max_iter {
         it += 1;
         // Forward differences: lengths in mm scaled to the footprint, logs and angles absolute.
-        let cols: Vec<Vec<f64>> = (0..np)
+        let h = [1e-5 * a0, 1e-5 * a0, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6];
+        let cols: Vec<Vec<f64>> = (0..NP)
             .map(|k| {
-                let mut q = p.clone();
+                let mut q = p;
                 q[k] += h[k];
-                let mk = values(&q);
+                let mk = model(pts, &q, steps);
                 mk.iter().zip(&m).map(|(a, b)| (a - b) / h[k]).collect()
             })
             .collect();
@@ -291,27 +175,30 @@ fn levenberg_marquardt(
             .collect();
         let mut accepted = false;
         for _ in 0..12 {
-            let mut qr = StreamingQr::new(np + 1);
-            let mut row = vec![0.0; np + 1];
+            let mut qr = StreamingQr::new(NP + 1);
+            let mut row = [0.0; NP + 1];
             for (i, q) in pts.iter().enumerate() {
-                for k in 0..np {
+                for k in 0..NP {
                     row[k] = cols[k][i];
                 }
-                row[np] = q.2 - m[i];
+                row[NP] = q.2 - m[i];
                 qr.push_row(&row);
             }
-            for k in 0..np {
-                let mut r = vec![0.0; np + 1];
+            for k in 0..NP {
+                let mut r = [0.0; NP + 1];
                 r[k] = (lambda * diag[k]).sqrt();
                 qr.push_row(&r);
             }
-            let d = solve_from_r(&qr.finish(), np + 1).coefficients;
-            let mut q = p.clone();
-            for k in 0..np {
+            let d = solve_from_r(&qr.finish(), NP + 1).coefficients;
+            let mut q = p;
+            for k in 0..NP {
                 q[k] += d[k];
             }
-            clamp(&mut q);
-            let mq = values(&q);
+            // Keep the trial inside the plausible region.
+            q[4] = q[4].clamp(0.05f64.ln(), 50f64.ln());
+            q[5] = q[5].clamp((0.02 * a0).ln(), (200.0 * a0).ln());
+            q[3] = q[3].min((2.0 * window).ln());
+            let mq = model(pts, &q, steps);
             let cq = cost_of(pts, &mq);
             if cq.is_finite() && cq < cost {
                 let rel = (cost - cq) / cost.max(1e-300);
@@ -362,35 +249,5 @@ mod tests {
         assert!((f.shape.gamma - 0.5).abs() < 1e-3, "{f:?}");
         assert!((f.centre.0 - uc).abs() < 1e-4 && (f.centre.1 - vc).abs() < 1e-4);
         assert!(f.residual_rms < 1e-4 * f.data_rms, "{f:?}");
-    }
-
-    #[test]
-    fn recovers_a_gaussian_sampled_at_one_pixel_per_sigma() {
-        // sigma 0.6 mm at 0.65 mm pixels, centre off the pixels: the smooth shape with beta 1.
-        let (px, n) = (0.65, 21usize);
-        let (uc, vc) = (10.4, 9.7);
-        let g = SmoothShape {
-            peak: 10.0,
-            sigma_mm: 0.6,
-            beta: 1.0,
-        };
-        let rate = Array2::from_shape_fn((n, n), |(i, j)| {
-            g.rate_at((j as f64 - vc) * px, (i as f64 - uc) * px)
-        });
-        let use_px = Array2::from_elem((n, n), true);
-        let start = FitStart {
-            centre: (10.0, 10.0),
-            peak: 8.0,
-            a_mm: 2.6,
-        };
-        let f = fit_smooth(&rate, &use_px, px, px, start, 5.0).unwrap();
-        assert!((f.shape.sigma_mm / 0.6 - 1.0).abs() < 1e-5, "{f:?}");
-        assert!((f.shape.beta - 1.0).abs() < 1e-5, "{f:?}");
-        assert!((f.shape.peak / 10.0 - 1.0).abs() < 1e-5, "{f:?}");
-        assert!((f.centre.0 - uc).abs() < 1e-5 && (f.centre.1 - vc).abs() < 1e-5);
-        assert!(f.residual_rms < 1e-5 * f.data_rms, "{f:?}");
-        // A Gaussian's 1e-6 radius: sigma sqrt(2 ln 1e6).
-        let r = f.shape.radius_below(1e-6);
-        assert!((r / (0.6 * (2.0 * 1e6f64.ln()).sqrt()) - 1.0).abs() < 1e-4);
     }
 }
