@@ -121,10 +121,12 @@ fn sample_runs_built_in_effects_found_within_20_percent() {
 /// a raster ripple the vibration changes by a few per cent.
 ///
 /// Measured on the committed samples: σ1 after polishing 4.463 nm (original) and 4.312 nm
-/// (suppression), 2.21 / 2.20 nm before; difference −0.150 nm; forcing original 4.95 N
-/// [4.51, 5.39], suppression 5.66 N [4.37, 6.87] (truth 5 N both); shares: normal_offset 1.070,
-/// interaction −0.061, envelope 0.021, dwell_execution 0.017 (vibration 1.047), path_offset
-/// −0.018, direction_lag −0.018, removal_rate −0.003, unexplained −0.008.
+/// (suppression), 2.21 / 2.20 nm before; difference −0.150 nm; forcing (read from the imprint
+/// band along the scan; refitted with the calibrated path effects taken out of the removal and
+/// the calibrated servo lag in the forcing model) original 4.77 N [4.38, 5.15], suppression
+/// 4.44 N [3.43, 5.32] (truth 5 N both); shares: normal_offset 0.988, dwell_execution 0.013,
+/// lateral_jitter −0.0006 (vibration 1.000), path_offset −0.057, removal_rate 0.022,
+/// direction_lag −0.011, unexplained 0.046.
 #[test]
 fn sample_runs_difference_given_to_vibration() {
     let runs: Vec<RunInput> = ["original", "suppression"]

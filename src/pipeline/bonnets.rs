@@ -336,13 +336,73 @@ fn at_recipe_when_unconstrained(mut fit: ForcingFit, recipe: &VibrationParams) -
     fit
 }
 
+/// Effects of a calibration that the forcing model already accounts for: the TIF scale (the
+/// model is rebuilt with it, and the fit's free rate scale takes what is left) and the
+/// registration (the after map is resampled through it).
+const MODELLED_EFFECTS: [&str; 2] = ["tif_scale", "registration"];
+
+/// The measured removal without the removal the calibration's other accepted effects add
+/// (their [`bonnetlab_calibrate::run::Maps::effect_removal_nm`]), on the pixels the calibration
+/// fitted (the effect maps are zero elsewhere); `removal` unchanged when no such effect was
+/// accepted.
+fn without_unmodelled_effects(
+    removal: &Surface,
+    cal: &Calibration,
+    also_modelled: &[&str],
+) -> Result<Surface, bonnetlab_surface::SurfaceError> {
+    let added: Vec<&Array2<f64>> = cal
+        .maps
+        .effect_removal_nm
+        .iter()
+        .filter(|(kind, _)| {
+            !MODELLED_EFFECTS.contains(&kind.as_str()) && !also_modelled.contains(&kind.as_str())
+        })
+        .map(|(_, m)| m)
+        .collect();
+    let fitted = cal.maps.final_residual_nm.as_ref().map(|(_, m)| m);
+    let (Some(fitted), false) = (fitted, added.is_empty()) else {
+        return Ok(removal.clone());
+    };
+    let mut z = removal.heights_nm().clone();
+    for m in added {
+        z -= m;
+    }
+    let valid = ndarray::Zip::from(removal.valid())
+        .and(fitted)
+        .map_collect(|&a, &b| a && b);
+    Surface::with_mask(z, valid, removal.dx_mm, removal.dy_mm)
+}
+
+/// The path log with every sample moved back by `lag_mm` along its direction of travel (the
+/// executed position of a servo lag; the direction of the segment to the next sample, the last
+/// sample the previous segment's).
+fn lag_path(path: &PathLog, lag_mm: f64) -> Result<PathLog, bonnetlab_process::ProcessError> {
+    let n = path.len();
+    let (mut x, mut y) = (path.x_mm.clone(), path.y_mm.clone());
+    for k in 0..n {
+        let (a, b) = if k + 1 < n {
+            (k, k + 1)
+        } else {
+            (k.saturating_sub(1), k)
+        };
+        let (dx, dy) = (path.x_mm[b] - path.x_mm[a], path.y_mm[b] - path.y_mm[a]);
+        let d = dx.hypot(dy);
+        if d > 1e-12 {
+            x[k] -= lag_mm * dx / d;
+            y[k] -= lag_mm * dy / d;
+        }
+    }
+    PathLog::new(path.t_s.clone(), x, y)
+}
+
 /// Analyses one run.
 ///
 /// Calibration does not model vibration: given the raw maps it explains the spindle imprint
 /// with aliases (a rate oscillation at the spindle period, path errors at the pitch). So the
 /// forcing is fitted first (recipe TIF, unregistered maps), the run is calibrated with the
 /// vibration's removal at that forcing taken back (`after + induced`), and the forcing refitted
-/// on the calibrated TIF and registered after map; when the calibrated TIF scale moved by more
+/// on the calibrated TIF and registered after map, with the removal of the calibration's other
+/// accepted effects (path and rate effects the forcing model does not have) taken out; when the calibrated TIF scale moved by more
 /// than 0.5 %, once more (at most two calibrations).
 pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, BonnetsError> {
     let file = run.recipe_file.as_path();
@@ -465,17 +525,46 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
             Some(a) => common(a)?,
             None => (before0.clone(), after0.clone(), removal0.clone()),
         };
-        if moved || after_reg.is_some() {
-            fit = infer_forcing(&model, &maps.2, &opts.infer).map_err(|e| perr(&e))?;
-        }
+        // The forcing model is the commanded path's: the run's calibrated path and rate effects
+        // (a servo lag, a path offset, rate drifts) are not in it, and left in the removal
+        // their spectrum is read as forcing. They are taken out before the refit.
+        let target = without_unmodelled_effects(&maps.2, &cal, &[]).map_err(|e| perr(&e))?;
+        fit = infer_forcing(&model, &target, &opts.infer).map_err(|e| perr(&e))?;
         state = Some((cal, maps));
         if !moved {
             break;
         }
     }
-    let Some((cal, (before, after, _removal))) = state else {
+    let Some((cal, (before, after, removal))) = state else {
         return Err(perr(&"no calibration round ran"));
     };
+    // A calibrated servo lag moves neighbouring raster lines in opposite directions along the
+    // scan, which changes how their spindle imprints add where the spot covers two lines: the
+    // commanded path's model misreads that as forcing. With a lag accepted, the forcing model is
+    // built on the lagged path (and the lag's removal is no longer taken out of the target).
+    let lagged = effect_num(&cal, "direction_lag", "lag_mm")
+        .filter(|l| l.is_finite() && *l != 0.0)
+        .map(|l| lag_path(&run.path, l))
+        .transpose()
+        .map_err(|e| perr(&e))?;
+    if let Some(lp) = &lagged {
+        let rescaled;
+        let tool_now = if scale != 1.0 {
+            rescaled = scaled_tool_model(&run.tif, &tool, scale, dx, dy).map_err(|e| perr(&e))?;
+            &rescaled
+        } else {
+            &tool
+        };
+        let inp = CouplingInput {
+            tool: tool_now,
+            path: lp,
+            ..input
+        };
+        model = ForcingModel::build(&inp, run.bonnet, &opts.coupling).map_err(|e| perr(&e))?;
+        let target =
+            without_unmodelled_effects(&removal, &cal, &["direction_lag"]).map_err(|e| perr(&e))?;
+        fit = infer_forcing(&model, &target, &opts.infer).map_err(|e| perr(&e))?;
+    }
 
     // Measured values and the causes.
     let sigma1 = |s: &Surface| {

@@ -14,8 +14,19 @@
 //! the quadratic form `Σ_kl w_k w_l Q_kl`; Q is built once by polarisation
 //! (`Q_kl = (PSD[C_k + C_l] − PSD[C_k] − PSD[C_l]) / 2`) from the crate's own PSD.
 //!
-//! Fit: least squares in ln P over the bins of both axes. For each (F, S) on a grid, (c², m²) ≥ 0
-//! come from an iteratively reweighted linear fit; the SSR is turned into χ² with the residual
+//! Bins: the spindle forcing is read where it has its own signature, the imprint band along the
+//! scan (X bins where the PSD of the removal's linear response to F is within 20 dB of its
+//! peak) with a flank on each side as wide as the band; c² is fixed on the bins where the
+//! commanded path's removal is within 20 dB of its peak (both axes: part-scale figure, raster
+//! ripple), m² (a flat local background: measurement noise, texture, path errors the model does
+//! not have) on the band and flanks. Unmodelled broadband content therefore moves m², not F.
+//! (Over every bin with a free c, the exact-deposition original sample run read 1.9 N clean and
+//! 6.9 N with its servo lag, truth 5 N: tests/forcing_truth.rs.) The broadband force S has no
+//! band: its profile (and interval) is from every unbiased bin of both axes with free c² and m².
+//! Without an imprint band (harmonics beyond Nyquist) every bin is fitted with free c² and m².
+//!
+//! Fit: least squares in ln P. For each (F, S) on a grid, (c², m²) ≥ 0
+//! come from iteratively reweighted linear fits; the SSR is turned into χ² with the residual
 //! variance s² = SSR_min / (N − 4) and the window's ENBW (neighbouring bins are correlated:
 //! χ² = SSR / (s² · ENBW)). Intervals are profile-likelihood intervals: **95 %** two-sided
 //! (Δχ² = 3.84, one parameter); an upper bound is one-sided 95 % (Δχ² = 2.71). The forcing is
@@ -37,6 +48,13 @@ use std::f64::consts::PI;
 pub const DCHI2_95: f64 = 3.841_458_820_694_124;
 /// Δχ² of a one-sided 95 % upper bound of one parameter.
 pub const DCHI2_95_ONE_SIDED: f64 = 2.705_543_454_095_404;
+
+/// Width of the spindle-harmonic imprint band below the imprint's peak PSD, dB.
+pub const IMPRINT_BAND_DB: f64 = 20.0;
+/// Rate-scale bins: where the commanded path's removal PSD is within this of its peak, dB.
+pub const SCALE_BINS_DB: f64 = 20.0;
+/// Least width of each flank of the imprint band, bins.
+pub const MIN_FLANK_BINS: usize = 4;
 
 /// Search ranges of the forcing fit.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -178,6 +196,65 @@ impl SpectralModel {
         })
     }
 
+    /// The spindle-harmonic imprint band of the X (scan) axis: the unbiased X bins where the
+    /// PSD of the removal's linear response to the forcing (`Q_11`, nm² mm per N²) is within
+    /// [`IMPRINT_BAND_DB`] of its peak, as (first, last) bin; None when the model has no imprint
+    /// (the harmonics fall beyond Nyquist).
+    pub fn imprint_band(&self) -> Option<(usize, usize)> {
+        let ax = &self.axes[0];
+        let lin = |b: usize| ax.q[b][N_MONO + 1];
+        let from = ax.first.max(1);
+        let peak = (from..ax.freq.len()).map(lin).fold(0.0, f64::max);
+        if !(peak > 0.0 && peak.is_finite()) {
+            return None;
+        }
+        let level = peak * 10f64.powf(-IMPRINT_BAND_DB / 10.0);
+        let inside: Vec<usize> = (from..ax.freq.len()).filter(|&b| lin(b) >= level).collect();
+        Some((*inside.first()?, *inside.last()?))
+    }
+
+    /// Bins of the fit as (axis, bin), axis 0 = X, and how many of them lead as rate-scale
+    /// bins. With an imprint band: first the bins of both axes where the commanded path's
+    /// removal (`Q_00`) is within [`SCALE_BINS_DB`] of its peak on that axis (the raster ripple
+    /// and the part-scale figure: they fix the removal-rate scale, far above any noise), then
+    /// the X bins of the imprint band with a flank on each side as wide as the band (at least
+    /// [`MIN_FLANK_BINS`]): the flanks fix the flat local background (measurement noise,
+    /// texture, path errors the model does not have), the band the forcing. Without an imprint
+    /// band: every unbiased bin of both axes, none leading (the scale and a white level are
+    /// fitted over all of them).
+    fn fit_bins(&self) -> (Vec<(usize, usize)>, Option<usize>) {
+        let Some((lo, hi)) = self.imprint_band() else {
+            let mut all = Vec::new();
+            for (a, ax) in self.axes.iter().enumerate() {
+                all.extend((ax.first.max(1)..ax.freq.len()).map(|b| (a, b)));
+            }
+            return (all, None);
+        };
+        let mut bins = Vec::new();
+        for (a, ax) in self.axes.iter().enumerate() {
+            let from = ax.first.max(1);
+            let base = |b: usize| ax.q[b][0];
+            let peak = (from..ax.freq.len()).map(base).fold(0.0, f64::max);
+            let level = peak * 10f64.powf(-SCALE_BINS_DB / 10.0);
+            bins.extend(
+                (from..ax.freq.len())
+                    .filter(|&b| peak > 0.0 && base(b) >= level)
+                    .map(|b| (a, b)),
+            );
+        }
+        let n_scale = bins.len();
+        let x = &self.axes[0];
+        let flank = (hi - lo).max(MIN_FLANK_BINS);
+        let from = lo.saturating_sub(flank).max(x.first.max(1));
+        let to = (hi + flank).min(x.freq.len() - 1);
+        for b in from..=to {
+            if !bins[..n_scale].contains(&(0, b)) {
+                bins.push((0, b));
+            }
+        }
+        (bins, Some(n_scale))
+    }
+
     /// Model PSD of the removal (no scale, no noise) at forcing (F, S): X bins then Y bins.
     fn removal_psd(&self, fn_n: f64, noise_n: f64, bins: &[(usize, usize)], out: &mut Vec<f64>) {
         let w = monomials(fn_n, noise_n);
@@ -279,6 +356,31 @@ fn fit_scale_noise(meas: &[f64], model: &[f64], white: &[f64]) -> (f64, f64, f64
             let p = (a * model[i] + b * white[i]).max(1e-300);
             wgt[i] = 1.0 / (p * p);
         }
+    }
+    (ssr_log(meas, model, white, a, b), a, b)
+}
+
+/// The fit with an imprint band: the rate scale a from the first `n_scale` bins (where the
+/// commanded path's removal dominates; a white level is fitted with it there), then the
+/// flat background b ≥ 0 from the band and its flanks by an iteratively reweighted fit of
+/// P ≈ a M + b W in ln P with a held; returns (SSR over all bins, a, b).
+fn fit_scale_then_background(
+    meas: &[f64],
+    model: &[f64],
+    white: &[f64],
+    n_scale: usize,
+) -> (f64, f64, f64) {
+    let (_, a, _) = fit_scale_noise(&meas[..n_scale], &model[..n_scale], &white[..n_scale]);
+    let mut b = 0.0;
+    for _ in 0..6 {
+        let (mut sww, mut swr) = (0.0, 0.0);
+        for i in n_scale..meas.len() {
+            let q = (a * model[i] + b * white[i]).max(meas[i] * 1e-6);
+            let w = 1.0 / (q * q);
+            sww += w * white[i] * white[i];
+            swr += w * white[i] * (meas[i] - a * model[i]);
+        }
+        b = if sww > 0.0 { (swr / sww).max(0.0) } else { 0.0 };
     }
     (ssr_log(meas, model, white, a, b), a, b)
 }
@@ -422,19 +524,23 @@ pub fn infer_forcing(
     let mut bins = Vec::new();
     let mut meas = Vec::new();
     let mut white = Vec::new();
-    for (a, ax) in spec.axes.iter().enumerate() {
-        let m = meas_axes[a];
-        for b in ax.first.max(1)..ax.freq.len() {
-            let f = ax.freq[b];
-            let p = m.psd_nm2_mm[b];
-            if f >= opts.band_per_mm.0 && f <= opts.band_per_mm.1 && p > 0.0 && p.is_finite() {
-                bins.push((a, b));
-                meas.push(p);
-                white.push(ax.white);
+    let (candidates, n_lead) = spec.fit_bins();
+    let mut n_scale = n_lead.map(|_| 0);
+    for (i, &(a, b)) in candidates.iter().enumerate() {
+        let f = spec.axes[a].freq[b];
+        let p = meas_axes[a].psd_nm2_mm[b];
+        if f >= opts.band_per_mm.0 && f <= opts.band_per_mm.1 && p > 0.0 && p.is_finite() {
+            bins.push((a, b));
+            meas.push(p);
+            white.push(spec.axes[a].white);
+            if let (Some(n), Some(lead)) = (n_scale.as_mut(), n_lead) {
+                if i < lead {
+                    *n += 1;
+                }
             }
         }
     }
-    if bins.len() < 8 {
+    if bins.len() < 8 || n_scale == Some(0) {
         return Err(VibrationError::InvalidArgument(format!(
             "only {} PSD bins in the fit band: the map is too small",
             bins.len()
@@ -447,17 +553,12 @@ pub fn infer_forcing(
     }
     let fn_grid = grid(opts.fn_max_n, opts.fn_steps);
     let noise_grid = grid(opts.noise_max_n, opts.noise_steps);
-    let mut ssr = vec![0.0; fn_grid.len() * noise_grid.len()];
-    let mut scale = vec![(0.0, 0.0); ssr.len()];
-    let mut buf = Vec::with_capacity(bins.len());
-    for (i, &f) in fn_grid.iter().enumerate() {
-        for (j, &s) in noise_grid.iter().enumerate() {
-            spec.removal_psd(f, s, &bins, &mut buf);
-            let (r, a, b) = fit_scale_noise(&meas, &buf, &white);
-            ssr[i * noise_grid.len() + j] = r;
-            scale[i * noise_grid.len() + j] = (a, b);
-        }
-    }
+    let (ssr, scale) = grid_fit(
+        &spec,
+        (&bins, &meas, &white, n_scale),
+        &fn_grid,
+        &noise_grid,
+    );
     let (kmin, &ssr_min) =
         ssr.iter().enumerate().fold(
             (0, &f64::INFINITY),
@@ -475,13 +576,46 @@ pub fn infer_forcing(
                 .fold(f64::INFINITY, f64::min))
         })
         .collect();
-    let prof_noise: Vec<f64> = (0..ns)
-        .map(|j| {
-            chi((0..fn_grid.len())
-                .map(|i| ssr[i * ns + j])
-                .fold(f64::INFINITY, f64::min))
-        })
-        .collect();
+    // The broadband force has no band of its own: its imprint is flat along both axes, under
+    // the measurement noise. Its profile comes from every unbiased bin of both axes (a free
+    // rate scale and white level), as the joint fit gives it; the spindle forcing's does not.
+    let prof_noise: Vec<f64> = match n_scale {
+        None => (0..ns)
+            .map(|j| {
+                chi((0..fn_grid.len())
+                    .map(|i| ssr[i * ns + j])
+                    .fold(f64::INFINITY, f64::min))
+            })
+            .collect(),
+        Some(_) => {
+            let (mut fb, mut fm, mut fw) = (Vec::new(), Vec::new(), Vec::new());
+            for (a, ax) in spec.axes.iter().enumerate() {
+                for b in ax.first.max(1)..ax.freq.len() {
+                    let (f, p) = (ax.freq[b], meas_axes[a].psd_nm2_mm[b]);
+                    if f >= opts.band_per_mm.0
+                        && f <= opts.band_per_mm.1
+                        && p > 0.0
+                        && p.is_finite()
+                    {
+                        fb.push((a, b));
+                        fm.push(p);
+                        fw.push(ax.white);
+                    }
+                }
+            }
+            let (full, _) = grid_fit(&spec, (&fb, &fm, &fw, None), &fn_grid, &noise_grid);
+            let min = full.iter().copied().fold(f64::INFINITY, f64::min);
+            let var = (min / (fb.len() as f64 - 4.0).max(1.0)).max(1e-30);
+            (0..ns)
+                .map(|j| {
+                    (0..fn_grid.len())
+                        .map(|i| full[i * ns + j])
+                        .fold(f64::INFINITY, f64::min)
+                        / (var * spec.enbw_bins)
+                })
+                .collect()
+        }
+    };
     let (best_fn, forcing) = verdict(&fn_grid, &prof_fn, &model.params, model.bonnet, "run");
     let (jmin, best_noise) = refine_min(&noise_grid, &prof_noise);
     let nmin = prof_noise[jmin];
@@ -510,6 +644,33 @@ pub fn infer_forcing(
         ssr_grid: ssr,
         params: model.params.clone(),
     })
+}
+
+/// Bins of a fit: (axis, bin), measured PSD, white level, leading rate-scale bins.
+type FitBins<'a> = (&'a [(usize, usize)], &'a [f64], &'a [f64], Option<usize>);
+
+/// SSR of ln P and the fitted (rate scale², white level) on the (fn, noise) grid, fn-major.
+fn grid_fit(
+    spec: &SpectralModel,
+    (bins, meas, white, n_scale): FitBins<'_>,
+    fn_grid: &[f64],
+    noise_grid: &[f64],
+) -> (Vec<f64>, Vec<(f64, f64)>) {
+    let mut ssr = vec![0.0; fn_grid.len() * noise_grid.len()];
+    let mut scale = vec![(0.0, 0.0); ssr.len()];
+    let mut buf = Vec::with_capacity(bins.len());
+    for (i, &f) in fn_grid.iter().enumerate() {
+        for (j, &s) in noise_grid.iter().enumerate() {
+            spec.removal_psd(f, s, bins, &mut buf);
+            let (r, a, b) = match n_scale {
+                Some(n) => fit_scale_then_background(meas, &buf, white, n),
+                None => fit_scale_noise(meas, &buf, white),
+            };
+            ssr[i * noise_grid.len() + j] = r;
+            scale[i * noise_grid.len() + j] = (a, b);
+        }
+    }
+    (ssr, scale)
 }
 
 /// One forcing for several runs (each with its own bonnet damping and series compliance).
