@@ -48,6 +48,13 @@ pub trait Effect: Send + Sync {
     fn nl_steps(&self) -> Vec<f64> {
         Vec::new()
     }
+    /// Per non-linear parameter, the width of the interval around its value that the data
+    /// cannot resolve at all (a step time that falls while the tool is off the measured
+    /// aperture: the residual is flat across that span). The uncertainty adds `width / sqrt(12)`
+    /// (a uniform distribution over it) in quadrature; 0 where the data resolve the parameter.
+    fn nl_unresolved(&self, _p: &Problem) -> Vec<f64> {
+        vec![0.0; self.nl().len()]
+    }
     /// Whether the non-linear parameters move the executed path or the kernel (else only the
     /// measured map): decides what must be recomputed.
     fn moves_path(&self) -> bool {

@@ -85,6 +85,7 @@ pub fn uncertainties_and_correlations(
     let base = flat_params(effects, &lin0);
     let theta0: Vec<f64> = effects.iter().flat_map(|e| e.nl()).collect();
     let steps: Vec<f64> = effects.iter().flat_map(|e| e.nl_steps()).collect();
+    let unresolved: Vec<f64> = effects.iter().flat_map(|e| e.nl_unresolved(p)).collect();
     let mut grads = vec![vec![0.0; n]; base.len()];
     for j in 0..n {
         let (vals, h) = if j < nlin {
@@ -150,7 +151,13 @@ pub fn uncertainties_and_correlations(
                 .as_deref()
                 .map(|d| g.iter().zip(d).map(|(a, b)| a * b).sum())
                 .unwrap_or(0.0);
-            (classical.max(clustered).max(0.0) + systematic * systematic).sqrt()
+            // A parameter the data cannot resolve within a span: uniform over it.
+            let flat: f64 = unresolved
+                .iter()
+                .enumerate()
+                .map(|(k, w)| (g[nlin + k] * w).powi(2) / 12.0)
+                .sum();
+            (classical.max(clustered).max(0.0) + systematic * systematic + flat).sqrt()
         })
         .collect();
     Ok((sig, corr))

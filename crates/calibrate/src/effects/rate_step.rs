@@ -19,6 +19,59 @@ fn step(p: &Problem, at: f64) -> Vec<f64> {
         .collect()
 }
 
+/// Share of the TIF radius within which analysis pixels make a path sample visible.
+const SEEN_RADIUS_SHARE: f64 = 0.5;
+
+/// Whether the tool at sample k removes material on the analysis pixels: an analysis pixel
+/// within half the TIF radius of its centre.
+fn seen(p: &Problem, k: usize, mask: &[bool]) -> bool {
+    let g = &p.grid;
+    let r = SEEN_RADIUS_SHARE * p.tif_radius_mm;
+    let (x, y) = (p.samples.x_mm[k], p.samples.y_mm[k]);
+    let j0 = ((x - r - g.x0_mm) / g.dx_mm).floor().max(0.0) as usize;
+    let j1 = (((x + r - g.x0_mm) / g.dx_mm).ceil().max(-1.0) + 1.0) as usize;
+    let i0 = ((y - r - g.y0_mm) / g.dy_mm).floor().max(0.0) as usize;
+    let i1 = (((y + r - g.y0_mm) / g.dy_mm).ceil().max(-1.0) + 1.0) as usize;
+    for i in i0..i1.min(g.rows) {
+        let dy = g.y_mm(i) - y;
+        for j in j0..j1.min(g.cols) {
+            let dx = g.x_mm(j) - x;
+            if dx * dx + dy * dy <= r * r && mask[i * g.cols + j] {
+                return true;
+            }
+        }
+    }
+    false
+}
+
+/// Run-time fraction over which the tool is off the analysis pixels around `at` (0 when the
+/// sample at `at` is seen): a step inside that span changes nothing measured.
+pub fn unseen_span(p: &Problem, at: f64) -> f64 {
+    let s = &p.samples;
+    let n = s.len();
+    if n < 2 {
+        return 0.0;
+    }
+    let mut mask = vec![false; p.grid.rows * p.grid.cols];
+    for &k in &p.idx {
+        mask[k] = true;
+    }
+    let k0 = (0..n).find(|&k| s.tau(k) >= at).unwrap_or(n - 1);
+    if seen(p, k0, &mask) {
+        return 0.0;
+    }
+    let mut lo = k0;
+    while lo > 0 && !seen(p, lo - 1, &mask) {
+        lo -= 1;
+    }
+    let mut hi = k0;
+    while hi + 1 < n && !seen(p, hi + 1, &mask) {
+        hi += 1;
+    }
+    // From the last seen sample before to the first seen one after.
+    s.tau((hi + 1).min(n - 1)) - s.tau(lo.saturating_sub(1))
+}
+
 impl Effect for RateStep {
     fn kind(&self) -> &'static str {
         "rate_step"
@@ -40,6 +93,9 @@ impl Effect for RateStep {
     }
     fn moves_path(&self) -> bool {
         true
+    }
+    fn nl_unresolved(&self, p: &Problem) -> Vec<f64> {
+        vec![unseen_span(p, self.at_tau)]
     }
     fn rate_terms(&self, p: &Problem) -> Vec<(String, Vec<f64>)> {
         vec![(COL.into(), step(p, self.at_tau))]

@@ -1,0 +1,77 @@
+//! A rate step that falls while the tool is off the measured aperture (the corners of a round
+//! aperture on a square raster) cannot be timed within that span: the residual is flat across
+//! it. `rate_step::unseen_span` measures the span by scanning the analysis pixels under the
+//! tool; checked here against the span computed from the path geometry alone (distance of the
+//! tool centre from the aperture circle), and the reported 1-sigma of `at_fraction` against it.
+
+use bonnetlab_calibrate::effects::rate_step::unseen_span;
+use bonnetlab_calibrate::run::{calibrate, Options};
+use bonnetlab_calibrate::synth::{generate, InitialSurface, Injected, SynthConfig};
+
+#[test]
+fn step_time_off_the_aperture_is_uncertain_over_the_unseen_span() {
+    let (part, round) = (100.0, 70.0);
+    let base = SynthConfig::realistic(7, 160, part, InitialSurface::realistic_texture(2.2))
+        .with_round_aperture(true, round);
+    let run = generate(&base).expect("generate");
+    let p = run.problem().expect("problem");
+    let s = &p.samples;
+    // Geometry: a sample is unseen when its centre is farther than half the TIF radius (plus
+    // a pixel diagonal, the pixel scan's resolution) outside the aperture circle.
+    let (c, r) = (0.5 * part, 0.5 * round);
+    let margin = 0.5 * p.tif_radius_mm;
+    let pix = p.grid.dx_mm.hypot(p.grid.dy_mm);
+    let dist = |k: usize| (s.x_mm[k] - c).hypot(s.y_mm[k] - c) - r;
+    // The first sample deep in a corner, and the sample at the part centre.
+    let corner = (0..s.len())
+        .find(|&k| dist(k) > margin + 2.0 * pix && s.tau(k) > 0.3)
+        .expect("a corner sample");
+    let centre = (0..s.len())
+        .min_by(|&a, &b| dist(a).total_cmp(&dist(b)))
+        .unwrap();
+    assert_eq!(unseen_span(&p, s.tau(centre)), 0.0);
+    let span = unseen_span(&p, s.tau(corner));
+    // Geometric span: contiguous samples around `corner` beyond margin +- a pixel diagonal.
+    let extent = |m: f64| {
+        let (mut lo, mut hi) = (corner, corner);
+        while lo > 0 && dist(lo - 1) > m {
+            lo -= 1;
+        }
+        while hi + 1 < s.len() && dist(hi + 1) > m {
+            hi += 1;
+        }
+        s.tau(hi) - s.tau(lo)
+    };
+    let (inner, outer) = (extent(margin + pix), extent(margin - pix));
+    eprintln!("unseen span {span:.5}, geometric {inner:.5} - {outer:.5}");
+    assert!(inner > 0.0, "the corner sample is unseen by geometry");
+    assert!(
+        span >= inner && span <= outer + 4.0 * (s.tau(1) - s.tau(0)).abs() + 1e-12,
+        "unseen span {span} outside the geometric [{inner}, {outer}]"
+    );
+
+    // A 10 % step there: the reported 1-sigma covers at least the uniform spread over the span.
+    let at = s.tau(corner);
+    let cfg = SynthConfig {
+        effects: vec![Injected::RateStep {
+            at_tau: at,
+            fraction: 0.1,
+        }],
+        ..base
+    };
+    let run = generate(&cfg).expect("generate");
+    let cal = calibrate(&run.problem().expect("problem"), &Options::default()).expect("calibrate");
+    let step = cal
+        .effects
+        .iter()
+        .find(|e| e.kind == "rate_step")
+        .unwrap_or_else(|| panic!("rate_step not found: {:?}", cal.effects));
+    let sigma = step.uncertainties["at_fraction"].as_f64().unwrap();
+    let est = step.params["at_fraction"].as_f64().unwrap();
+    eprintln!("at_fraction {est:.5} (true {at:.5}) sigma {sigma:.5}");
+    assert!(
+        sigma >= 0.9 * inner / 12f64.sqrt(),
+        "sigma {sigma} below the unseen span's {}",
+        inner / 12f64.sqrt()
+    );
+}
