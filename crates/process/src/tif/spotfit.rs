@@ -19,7 +19,7 @@ use ndarray::Array2;
 use rayon::prelude::*;
 
 use super::bonnet::BonnetShape;
-use bonnetlab_surface::lsq::{solve_from_r, StreamingQr};
+use bonnetlab_surface::lm::{minimize, LmProblem, LmSettings};
 
 /// A fitted shape with its centre and how well it fits.
 #[derive(Debug, Clone, PartialEq)]
@@ -144,81 +144,114 @@ fn cost_of(pts: &[(f64, f64, f64)], m: &[f64]) -> f64 {
     pts.iter().zip(m).map(|(q, v)| (q.2 - v).powi(2)).sum()
 }
 
-/// Damped Gauss-Newton with a forward-difference Jacobian: (parameters, cost, iterations).
+/// The shape fit as the project's one Levenberg-Marquardt driver sees it: residual
+/// `model - data` at the fit's pixels, forward-difference Jacobian, trials clamped to the
+/// plausible region.
+struct ShapeProblem<'a> {
+    pts: &'a [(f64, f64, f64)],
+    steps: usize,
+    a0: f64,
+    window: f64,
+}
+
+/// An evaluation: the model at the points and the residual `model - data`.
+struct Trial {
+    m: Vec<f64>,
+    r: Vec<f64>,
+}
+
+impl ShapeProblem<'_> {
+    fn trial(&self, p: &[f64; NP]) -> Trial {
+        let m = model(self.pts, p, self.steps);
+        let r = m.iter().zip(self.pts).map(|(v, q)| v - q.2).collect();
+        Trial { m, r }
+    }
+}
+
+fn params(x: &[f64]) -> [f64; NP] {
+    let mut p = [0.0; NP];
+    p.copy_from_slice(x);
+    p
+}
+
+impl LmProblem for ShapeProblem<'_> {
+    type State = Trial;
+    type Error = std::convert::Infallible;
+
+    fn residual<'s>(&self, state: &'s Trial) -> &'s [f64] {
+        &state.r
+    }
+
+    fn cost(&self, state: &Trial) -> f64 {
+        cost_of(self.pts, &state.m)
+    }
+
+    fn jacobian(&mut self, x: &[f64], state: &Trial) -> Result<Vec<Vec<f64>>, Self::Error> {
+        // Forward differences: lengths in mm scaled to the footprint, logs and angles absolute.
+        let h = [1e-5 * self.a0, 1e-5 * self.a0, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6];
+        let p = params(x);
+        Ok((0..NP)
+            .map(|k| {
+                let mut q = p;
+                q[k] += h[k];
+                let mk = model(self.pts, &q, self.steps);
+                mk.iter()
+                    .zip(&state.m)
+                    .map(|(a, b)| (a - b) / h[k])
+                    .collect()
+            })
+            .collect())
+    }
+
+    fn propose(&self, x: &[f64], step: &[f64]) -> Vec<f64> {
+        let mut q: Vec<f64> = x.iter().zip(step).map(|(a, d)| a + d).collect();
+        // Keep the trial inside the plausible region.
+        q[4] = q[4].clamp(0.05f64.ln(), 50f64.ln());
+        q[5] = q[5].clamp((0.02 * self.a0).ln(), (200.0 * self.a0).ln());
+        q[3] = q[3].min((2.0 * self.window).ln());
+        q
+    }
+
+    fn evaluate(&mut self, x: &[f64], _current: &Trial) -> Result<Option<Trial>, Self::Error> {
+        Ok(Some(self.trial(&params(x))))
+    }
+}
+
+/// The shape fit from `p` by `surface::lm`: (parameters, cost, iterations).
 fn levenberg_marquardt(
     pts: &[(f64, f64, f64)],
-    mut p: [f64; NP],
+    p: [f64; NP],
     steps: usize,
     a0: f64,
     window: f64,
     max_iter: usize,
 ) -> Option<([f64; NP], f64, usize)> {
-    let mut m = model(pts, &p, steps);
-    let mut cost = cost_of(pts, &m);
-    let mut lambda = 1e-3;
-    let mut it = 0;
-    while it < max_iter {
-        it += 1;
-        // Forward differences: lengths in mm scaled to the footprint, logs and angles absolute.
-        let h = [1e-5 * a0, 1e-5 * a0, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6];
-        let cols: Vec<Vec<f64>> = (0..NP)
-            .map(|k| {
-                let mut q = p;
-                q[k] += h[k];
-                let mk = model(pts, &q, steps);
-                mk.iter().zip(&m).map(|(a, b)| (a - b) / h[k]).collect()
-            })
-            .collect();
-        let diag: Vec<f64> = cols
-            .iter()
-            .map(|c| c.iter().map(|v| v * v).sum::<f64>().max(1e-300))
-            .collect();
-        let mut accepted = false;
-        for _ in 0..12 {
-            let mut qr = StreamingQr::new(NP + 1);
-            let mut row = [0.0; NP + 1];
-            for (i, q) in pts.iter().enumerate() {
-                for k in 0..NP {
-                    row[k] = cols[k][i];
-                }
-                row[NP] = q.2 - m[i];
-                qr.push_row(&row);
-            }
-            for k in 0..NP {
-                let mut r = [0.0; NP + 1];
-                r[k] = (lambda * diag[k]).sqrt();
-                qr.push_row(&r);
-            }
-            let d = solve_from_r(&qr.finish(), NP + 1).coefficients;
-            let mut q = p;
-            for k in 0..NP {
-                q[k] += d[k];
-            }
-            // Keep the trial inside the plausible region.
-            q[4] = q[4].clamp(0.05f64.ln(), 50f64.ln());
-            q[5] = q[5].clamp((0.02 * a0).ln(), (200.0 * a0).ln());
-            q[3] = q[3].min((2.0 * window).ln());
-            let mq = model(pts, &q, steps);
-            let cq = cost_of(pts, &mq);
-            if cq.is_finite() && cq < cost {
-                let rel = (cost - cq) / cost.max(1e-300);
-                p = q;
-                m = mq;
-                cost = cq;
-                lambda = (lambda / 3.0).max(1e-12);
-                accepted = true;
-                if rel < 1e-9 {
-                    return Some((p, cost, it));
-                }
-                break;
-            }
-            lambda *= 4.0;
-        }
-        if !accepted {
-            break;
-        }
-    }
-    p.iter().all(|v| v.is_finite()).then_some((p, cost, it))
+    let mut prob = ShapeProblem {
+        pts,
+        steps,
+        a0,
+        window,
+    };
+    let start = prob.trial(&p);
+    let settings = LmSettings {
+        max_iter,
+        max_tries: 12,
+        lambda0: 1e-3,
+        increase: 4.0,
+        decrease: 3.0,
+        lambda_min: 1e-12,
+        rel_tol: 1e-9,
+        step_tol: 0.0,
+        diag_floor: 1e-300,
+    };
+    let out = match minimize(&mut prob, p.to_vec(), start, &settings) {
+        Ok(o) => o,
+        Err(e) => match e {},
+    };
+    let p = params(&out.x);
+    p.iter()
+        .all(|v| v.is_finite())
+        .then_some((p, out.cost, out.iterations))
 }
 
 #[cfg(test)]
