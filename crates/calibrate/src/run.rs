@@ -8,7 +8,7 @@ use serde::Serialize;
 use serde_json::{Map, Value};
 
 use crate::band::{BandResidual, ProcessBand};
-use crate::effects::{candidates, Current};
+use crate::effects::{candidates, fallback, Candidate, Current};
 use crate::error::CalibrateError;
 use crate::model::{fit, Effect, Eval, Fit, Param, Problem};
 use crate::noise::{band_noise_floor, initial_noise_floor};
@@ -268,6 +268,45 @@ fn drop_negligible(
     Ok(None)
 }
 
+/// The contenders of a round among the candidates `keep` admits, in preference order.
+/// Parsimony: among significant candidates within 10 % of the best held-out reduction, the one
+/// with the fewest parameters first, then the earlier kind in `PRIORITY` (the spec's table
+/// first: e.g. a time drift before a rate varying with y, which a raster makes nearly
+/// collinear), then the larger reduction. One contender per kind, at most three: near-ties of
+/// different kinds (a slow rate oscillation vs a path wiggle along y on a raster, which
+/// compresses the line spacing) are settled by refining each and comparing the refined fits
+/// (`settle`).
+fn contenders_of(
+    cands: &[Candidate],
+    scores: &[Score],
+    keep: impl Fn(&Candidate) -> bool,
+) -> Vec<usize> {
+    let admitted = |i: usize| scores[i].significant() && keep(&cands[i]);
+    let top = (0..cands.len())
+        .filter(|&i| admitted(i))
+        .map(|i| scores[i].delta)
+        .fold(0.0, f64::max);
+    let mut contenders: Vec<usize> = (0..cands.len())
+        .filter(|&i| admitted(i) && scores[i].delta >= 0.9 * top)
+        .collect();
+    contenders.sort_by(|&a, &b| {
+        let (ca, cb) = (&cands[a], &cands[b]);
+        ca.extra
+            .len()
+            .cmp(&cb.extra.len())
+            .then(priority(ca.kind).cmp(&priority(cb.kind)))
+            .then(scores[b].delta.total_cmp(&scores[a].delta))
+    });
+    let mut kinds = Vec::new();
+    contenders.retain(|&i| {
+        let fresh = !kinds.contains(&cands[i].kind);
+        kinds.push(cands[i].kind);
+        fresh
+    });
+    contenders.truncate(3);
+    contenders
+}
+
 /// Which refined contender to accept. The first (in preference order: fewest parameters, the
 /// spec's kinds first) unless another leaves less than half of the excess mean square (above
 /// the noise floor) that the first leaves, and the difference is at least 2 % of the excess
@@ -385,39 +424,24 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                 })
                 .collect(),
         };
-        // Parsimony: among significant candidates within 10 % of the best held-out reduction,
-        // the one with the fewest parameters wins, then the earlier kind in `PRIORITY` (the
-        // spec's table first: e.g. a time drift before a rate varying with y, which a raster
-        // makes nearly collinear), then the larger reduction.
-        let top = scores
-            .iter()
-            .filter(|s| s.significant())
-            .map(|s| s.delta)
-            .fold(0.0, f64::max);
-        let mut contenders: Vec<usize> = scores
-            .iter()
-            .enumerate()
-            .filter(|(_, s)| s.significant() && s.delta >= 0.9 * top)
-            .map(|(i, _)| i)
-            .collect();
-        contenders.sort_by(|&a, &b| {
-            let (ca, cb) = (&cands[a], &cands[b]);
-            ca.extra
-                .len()
-                .cmp(&cb.extra.len())
-                .then(priority(ca.kind).cmp(&priority(cb.kind)))
-                .then(scores[b].delta.total_cmp(&scores[a].delta))
-        });
-        // One contender per kind, at most three: near-ties of different kinds (a slow rate
-        // oscillation vs a path wiggle along y on a raster, which compresses the line spacing)
-        // are settled by refining each and comparing the refined fits (`settle`).
-        let mut kinds = Vec::new();
-        contenders.retain(|&i| {
-            let fresh = !kinds.contains(&cands[i].kind);
-            kinds.push(cands[i].kind);
-            fresh
-        });
-        contenders.truncate(3);
+        let mut contenders = contenders_of(&cands, &scores, |_| true);
+        let mut lib_added = None;
+        // When only kinds no library entry names lead (a 35-knot rate map can take a time
+        // drift and part of a misregistration at once), the library's own first contender is
+        // refined beside them, first: `settle` keeps it unless a fallback kind leaves less
+        // than half its excess. What the library can name is named, with fewer parameters;
+        // an undeclared effect still wins where the library only stands in for it.
+        if !contenders.is_empty()
+            && contenders
+                .iter()
+                .all(|&i| fallback::is_fallback(cands[i].kind))
+        {
+            let lib = contenders_of(&cands, &scores, |c| !fallback::is_fallback(c.kind));
+            if let Some(&i) = lib.first() {
+                contenders.insert(0, i);
+                lib_added = Some(i);
+            }
+        }
         if contenders.is_empty() {
             rounds.push(round);
             break;
@@ -460,11 +484,20 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             rounds.push(round);
             continue;
         }
-        let pick = settle(
-            rms_before,
-            &refined.iter().map(|r| r.3.rms()).collect::<Vec<_>>(),
-            noise,
-        );
+        let rms: Vec<f64> = refined.iter().map(|r| r.3.rms()).collect();
+        // The fallback's contenders are settled among themselves first; the library's entry
+        // (first, when it was added) is kept unless their winner beats it by the same rule.
+        let pick = match refined.first() {
+            Some(r) if refined.len() > 1 && lib_added == Some(r.0) => {
+                let w = 1 + settle(rms_before, &rms[1..], noise);
+                if settle(rms_before, &[rms[0], rms[w]], noise) == 1 {
+                    w
+                } else {
+                    0
+                }
+            }
+            _ => settle(rms_before, &rms, noise),
+        };
         let (bi, trial, ev_t, f_t) = refined.swap_remove(pick);
         let cand = &cands[bi];
         let gain = |r: f64| rms_before * rms_before - r * r;

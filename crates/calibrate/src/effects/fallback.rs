@@ -619,6 +619,11 @@ pub fn passes(s: &Score, n_params: usize) -> bool {
 }
 
 /// The fallback candidates not yet accepted whose own held-out score clears the bar.
+/// Whether `kind` is one of the fallback's kinds (not a library kind).
+pub fn is_fallback(kind: &str) -> bool {
+    Basis::ALL.iter().any(|b| b.kind() == kind)
+}
+
 pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let fresh: Vec<Basis> = Basis::ALL
         .into_iter()

@@ -171,21 +171,32 @@ pub fn spectral_peaks(q: &[f64], h: &[f64], p_min: f64, p_max: f64, n: usize) ->
     kept.into_iter().map(|(f, pwr)| (1.0 / f, pwr)).collect()
 }
 
-/// All candidates of the library for the current state.
+/// All candidates of the library for the current state; the kinds no library entry names
+/// ([`fallback`]) last.
 pub fn candidates(cur: &Current) -> Vec<Candidate> {
+    let kinds: [(&str, fn(&Current) -> Vec<Candidate>); 11] = [
+        ("registration", registration::candidates),
+        ("rate_drift", rate_drift::candidates),
+        ("tif_scale", tif_scale::candidates),
+        ("direction_lag", direction_lag::candidates),
+        ("path_offset", path_offset::candidates),
+        ("periodic_path_error", periodic_path_error::candidates),
+        ("rate_covariate", rate_covariate::candidates),
+        ("rate_oscillation", rate_oscillation::candidates),
+        ("rate_step", rate_step::candidates),
+        ("rate_profile", rate_profile::candidates),
+        // Last: kinds no library entry names, offered only past a stricter held-out bar.
+        ("fallback", fallback::candidates),
+    ];
+    let trace = std::env::var_os("BONNETLAB_TRACE").is_some();
     let mut v = Vec::new();
-    v.extend(registration::candidates(cur));
-    v.extend(rate_drift::candidates(cur));
-    v.extend(tif_scale::candidates(cur));
-    v.extend(direction_lag::candidates(cur));
-    v.extend(path_offset::candidates(cur));
-    v.extend(periodic_path_error::candidates(cur));
-    v.extend(rate_covariate::candidates(cur));
-    v.extend(rate_oscillation::candidates(cur));
-    v.extend(rate_step::candidates(cur));
-    v.extend(rate_profile::candidates(cur));
-    // Last: kinds no library entry names, offered only past a stricter held-out bar.
-    v.extend(fallback::candidates(cur));
+    for (name, make) in kinds {
+        let t0 = std::time::Instant::now();
+        v.extend(make(cur));
+        if trace {
+            eprintln!("  candidates {name}: {:?}", t0.elapsed());
+        }
+    }
     v
 }
 
