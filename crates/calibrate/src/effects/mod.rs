@@ -171,10 +171,13 @@ pub fn spectral_peaks(q: &[f64], h: &[f64], p_min: f64, p_max: f64, n: usize) ->
     kept.into_iter().map(|(f, pwr)| (1.0 / f, pwr)).collect()
 }
 
+/// A kind's candidate builder.
+type KindCandidates = fn(&Current) -> Vec<Candidate>;
+
 /// All candidates of the library for the current state; the kinds no library entry names
 /// ([`fallback`]) last.
 pub fn candidates(cur: &Current) -> Vec<Candidate> {
-    let kinds: [(&str, fn(&Current) -> Vec<Candidate>); 11] = [
+    let kinds: [(&str, KindCandidates); 11] = [
         ("registration", registration::candidates),
         ("rate_drift", rate_drift::candidates),
         ("tif_scale", tif_scale::candidates),
