@@ -411,6 +411,26 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             .par_iter()
             .map(|c| holdout(&ev, &c.extra, &sp, &bg))
             .collect();
+        // Kinds no library entry names stay only past their stricter held-out bar.
+        let (cands, scores): (Vec<Candidate>, Vec<Score>) = cands
+            .into_iter()
+            .zip(scores)
+            .filter(|(c, s)| {
+                if !fallback::is_fallback(c.kind) {
+                    return true;
+                }
+                if trace {
+                    eprintln!(
+                        "fallback {}: held-out z {:.1}, reduction {:.3} ({} columns)",
+                        c.kind,
+                        s.z,
+                        s.fraction,
+                        c.extra.len()
+                    );
+                }
+                fallback::passes(s, c.extra.len())
+            })
+            .unzip();
         let mut round = Round {
             accepted: None,
             rejected: Vec::new(),

@@ -22,7 +22,7 @@ use std::sync::Arc;
 use crate::effects::{Candidate, Current};
 use crate::grid::sample;
 use crate::model::{Channel, Effect, Linear, Param, Problem};
-use crate::selection::{base_gram, holdout, split, Score};
+use crate::selection::Score;
 
 /// Held-out z a fallback must reach before it is offered.
 pub const FALLBACK_Z: f64 = 5.0;
@@ -618,11 +618,14 @@ pub fn passes(s: &Score, n_params: usize) -> bool {
         && s.fraction >= FALLBACK_FRACTION * (n_params.max(1) as f64).sqrt()
 }
 
-/// The fallback candidates not yet accepted whose own held-out score clears the bar.
 /// Whether `kind` is one of the fallback's kinds (not a library kind).
 pub fn is_fallback(kind: &str) -> bool {
     Basis::ALL.iter().any(|b| b.kind() == kind)
 }
+
+/// The fallback candidates not yet accepted that pass the prescreen. The selection scores
+/// them with the library's candidates and keeps those whose held-out score clears the
+/// stricter bar ([`passes`]).
 
 pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let fresh: Vec<Basis> = Basis::ALL
@@ -671,8 +674,6 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     if shapes.is_empty() {
         return Vec::new();
     }
-    let sp = split(p);
-    let bg = base_gram(cur.ev, &sp);
     let mut out = Vec::new();
     for shape in shapes {
         let b = shape.basis;
@@ -685,19 +686,6 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
                 cur.column(&[(&gc, Channel::Value)])
             })
             .collect();
-        let score = holdout(cur.ev, &extra, &sp, &bg);
-        if trace {
-            eprintln!(
-                "fallback {}: held-out z {:.1}, reduction {:.3} ({} columns)",
-                b.kind(),
-                score.z,
-                score.fraction,
-                extra.len()
-            );
-        }
-        if !passes(&score, extra.len()) {
-            continue;
-        }
         let shape = Arc::new(shape);
         out.push(Candidate {
             key: b.kind().into(),
