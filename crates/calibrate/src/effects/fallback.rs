@@ -626,7 +626,6 @@ pub fn is_fallback(kind: &str) -> bool {
 /// The fallback candidates not yet accepted that pass the prescreen. The selection scores
 /// them with the library's candidates and keeps those whose held-out score clears the
 /// stricter bar ([`passes`]).
-
 pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let fresh: Vec<Basis> = Basis::ALL
         .into_iter()
