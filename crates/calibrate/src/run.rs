@@ -571,6 +571,20 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             f = f2;
         }
     }
+    // The registration's texture bias taken out of the estimate (extrapolated to a Jacobian
+    // of no smoothing, see `uncertainty::registration_texture_step`), the linear terms refit.
+    if let Some(step) = crate::uncertainty::registration_texture_step(p, &effects, &ev, &f)? {
+        let theta: Vec<f64> = effects
+            .iter()
+            .flat_map(|e| e.nl())
+            .zip(&step)
+            .map(|(t, s)| t - s)
+            .collect();
+        crate::refine::set_nl(&mut effects, &theta);
+        let (e2, f2) = refine(p, &mut effects, 0)?;
+        ev = e2;
+        f = f2;
+    }
     let lin = ev.linear(&f);
     maps.effect_removal_nm = effect_removals(p, &effects, &ev, &f)?;
     let (sig, corr) = if effects.is_empty() {
