@@ -307,6 +307,45 @@ fn contenders_of(
     contenders
 }
 
+/// The contenders of a round ([`contenders_of`]) and, when the library's own first contender
+/// was put first, its index. When only kinds no library entry names lead (a 35-knot rate map
+/// can take a time drift and part of a misregistration at once), the library's first contender
+/// is refined beside them, first: [`pick`] keeps it unless a fallback kind leaves less than
+/// half its excess. What the library can name is named, with fewer parameters; an undeclared
+/// effect still wins where the library only stands in for it.
+fn round_contenders(cands: &[Candidate], scores: &[Score]) -> (Vec<usize>, Option<usize>) {
+    let mut contenders = contenders_of(cands, scores, |_| true);
+    if !contenders.is_empty()
+        && contenders
+            .iter()
+            .all(|&i| fallback::is_fallback(cands[i].kind))
+    {
+        let lib = contenders_of(cands, scores, |c| !fallback::is_fallback(c.kind));
+        if let Some(&i) = lib.first() {
+            contenders.insert(0, i);
+            return (contenders, Some(i));
+        }
+    }
+    (contenders, None)
+}
+
+/// Which refined contender (residual RMS `rms`, in contender order) is accepted. With the
+/// library's entry first (`lib_first`), the fallback's contenders are settled among
+/// themselves, and their winner replaces the library's entry only by the same rule
+/// ([`settle`]); otherwise [`settle`] over all.
+fn pick(rms_before: f64, rms: &[f64], noise: f64, lib_first: bool) -> usize {
+    if lib_first && rms.len() > 1 {
+        let w = 1 + settle(rms_before, &rms[1..], noise);
+        if settle(rms_before, &[rms[0], rms[w]], noise) == 1 {
+            w
+        } else {
+            0
+        }
+    } else {
+        settle(rms_before, rms, noise)
+    }
+}
+
 /// Which refined contender to accept. The first (in preference order: fewest parameters, the
 /// spec's kinds first) unless another leaves less than half of the excess mean square (above
 /// the noise floor) that the first leaves, and the difference is at least 2 % of the excess
@@ -444,24 +483,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                 })
                 .collect(),
         };
-        let mut contenders = contenders_of(&cands, &scores, |_| true);
-        let mut lib_added = None;
-        // When only kinds no library entry names lead (a 35-knot rate map can take a time
-        // drift and part of a misregistration at once), the library's own first contender is
-        // refined beside them, first: `settle` keeps it unless a fallback kind leaves less
-        // than half its excess. What the library can name is named, with fewer parameters;
-        // an undeclared effect still wins where the library only stands in for it.
-        if !contenders.is_empty()
-            && contenders
-                .iter()
-                .all(|&i| fallback::is_fallback(cands[i].kind))
-        {
-            let lib = contenders_of(&cands, &scores, |c| !fallback::is_fallback(c.kind));
-            if let Some(&i) = lib.first() {
-                contenders.insert(0, i);
-                lib_added = Some(i);
-            }
-        }
+        let (contenders, lib_added) = round_contenders(&cands, &scores);
         if contenders.is_empty() {
             rounds.push(round);
             break;
@@ -505,19 +527,8 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             continue;
         }
         let rms: Vec<f64> = refined.iter().map(|r| r.3.rms()).collect();
-        // The fallback's contenders are settled among themselves first; the library's entry
-        // (first, when it was added) is kept unless their winner beats it by the same rule.
-        let pick = match refined.first() {
-            Some(r) if refined.len() > 1 && lib_added == Some(r.0) => {
-                let w = 1 + settle(rms_before, &rms[1..], noise);
-                if settle(rms_before, &[rms[0], rms[w]], noise) == 1 {
-                    w
-                } else {
-                    0
-                }
-            }
-            _ => settle(rms_before, &rms, noise),
-        };
+        let lib_first = refined.first().is_some_and(|r| lib_added == Some(r.0));
+        let pick = pick(rms_before, &rms, noise, lib_first);
         let (bi, trial, ev_t, f_t) = refined.swap_remove(pick);
         let cand = &cands[bi];
         let gain = |r: f64| rms_before * rms_before - r * r;
@@ -750,5 +761,68 @@ fn clone_eval_shell(ev: &Eval) -> Eval {
         exec: ev.exec.clone(),
         kernels: ev.kernels.clone(),
         path_key: Vec::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cand(kind: &'static str, ncols: usize) -> Candidate {
+        Candidate {
+            key: kind.into(),
+            kind,
+            extra: vec![Vec::new(); ncols],
+            make: Box::new(|_, _| unreachable!("not built in these tests")),
+        }
+    }
+
+    fn score(delta: f64) -> Score {
+        Score {
+            delta,
+            z: 10.0,
+            fraction: 0.1,
+        }
+    }
+
+    #[test]
+    fn the_library_goes_first_when_only_fallback_kinds_lead() {
+        // A 35-knot rate map leads by far; a rate drift and a registration explain less.
+        let cands = vec![
+            cand("registration", 3),
+            cand("rate_drift", 1),
+            cand("rate_map", 35),
+        ];
+        let scores = vec![score(0.44), score(0.45), score(0.58)];
+        let (c, lib) = round_contenders(&cands, &scores);
+        // The library's first by parsimony (one column) goes first, then the fallback's.
+        assert_eq!(c, vec![1, 2]);
+        assert_eq!(lib, Some(1));
+        // A library kind among the leaders: nothing inserted.
+        let scores = vec![score(0.44), score(0.56), score(0.58)];
+        assert_eq!(round_contenders(&cands, &scores), (vec![1, 2], None));
+        // No significant library kind: the fallback alone.
+        let weak = Score {
+            z: 1.0,
+            ..score(0.44)
+        };
+        let scores = vec![weak, weak, score(0.58)];
+        assert_eq!(round_contenders(&cands, &scores), (vec![2], None));
+    }
+
+    #[test]
+    fn a_fallback_replaces_the_library_entry_only_when_it_halves_its_excess() {
+        // Floor 1 nm, 3 nm before the round.
+        let (before, noise) = (3.0, 1.0);
+        // The library's entry leaves 1.5 nm (excess 1.25 nm^2); a rate map 1.3 nm (0.69):
+        // not under half, the library is kept, though the rate map's residual is lower.
+        assert_eq!(pick(before, &[1.5, 1.3], noise, true), 0);
+        // A rate map leaving 1.1 nm (excess 0.21, under half of 1.25): it replaces the entry.
+        assert_eq!(pick(before, &[1.5, 1.3, 1.1], noise, true), 2);
+        // The fallback's contenders settle among themselves first: the first of them (1.3 nm)
+        // is kept against a later one not under half its excess, and then loses to the
+        // library's entry; one settle over all three would have taken the last (0.56 < 0.63).
+        assert_eq!(pick(before, &[1.5, 1.3, 1.25], noise, true), 0);
+        assert_eq!(pick(before, &[1.5, 1.3, 1.25], noise, false), 2);
     }
 }
