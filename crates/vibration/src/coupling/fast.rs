@@ -61,11 +61,49 @@ fn perr(e: impl ToString) -> VibrationError {
     VibrationError::Process(e.to_string())
 }
 
+/// `path` with every sample moved back by `lag_mm` along its direction of travel (the
+/// direction of the segment to the next sample; the last sample takes the previous segment's),
+/// at the same times: where a servo lag puts the tool. Not to be re-timed: moved corners are
+/// sharper than the path's and the acceleration limit would stretch the run's clock.
+pub fn direction_lag_path(path: &PathLog, lag_mm: f64) -> Result<PathLog, VibrationError> {
+    let n = path.len();
+    let (mut x, mut y) = (path.x_mm.clone(), path.y_mm.clone());
+    for k in 0..n {
+        let (a, b) = if k + 1 < n {
+            (k, k + 1)
+        } else {
+            (k.saturating_sub(1), k)
+        };
+        let (dx, dy) = (path.x_mm[b] - path.x_mm[a], path.y_mm[b] - path.y_mm[a]);
+        let d = dx.hypot(dy);
+        if d > 1e-12 {
+            x[k] -= lag_mm * dx / d;
+            y[k] -= lag_mm * dy / d;
+        }
+    }
+    PathLog::new(path.t_s.clone(), x, y).map_err(perr)
+}
+
 /// Per-mechanism removal maps (nm, on the map grid) by the fast expansion.
 pub fn fast_maps(
     input: &CouplingInput<'_>,
     bonnet: Bonnet,
     opts: &CouplingOptions,
+) -> Result<MechanismMaps, VibrationError> {
+    fast_maps_lagged(input, bonnet, opts, 0.0)
+}
+
+/// [`fast_maps`] of a run whose tool trails its path by `lag_mm` along the direction of travel
+/// (a servo lag, as calibrated: executed = path − lag · u at the same instant). The path is
+/// re-timed first (when `dwell_execution` is on) and moved after, so the clock, the spindle
+/// phase along each raster line and the ring-down are the unlagged run's; only where the tool
+/// is at each instant moves (lagging the path before re-timing stretched the sample run's clock
+/// by 4.1 s in 65.6 s at 0.3 mm and scrambled the imprint's phase from line to line).
+pub fn fast_maps_lagged(
+    input: &CouplingInput<'_>,
+    bonnet: Bonnet,
+    opts: &CouplingOptions,
+    lag_mm: f64,
 ) -> Result<MechanismMaps, VibrationError> {
     let p = input.params;
     let g = input.grid;
@@ -75,9 +113,19 @@ pub fn fast_maps(
 
     // Unperturbed removal of the commanded path and of the executed one: the one fast model.
     let mut fast = input.tool.fast_removal(&g).map_err(perr)?;
-    let baseline = fast.removal(input.path, None).map_err(perr)?;
+    let baseline = if lag_mm != 0.0 {
+        fast.removal(&direction_lag_path(input.path, lag_mm)?, None)
+    } else {
+        fast.removal(input.path, None)
+    }
+    .map_err(perr)?;
     let dwell_execution = if mech.dwell_execution {
-        fast.removal(&exec, None).map_err(perr)? - &baseline
+        let removal = if lag_mm != 0.0 {
+            fast.removal(&direction_lag_path(&exec, lag_mm)?, None)
+        } else {
+            fast.removal(&exec, None)
+        };
+        removal.map_err(perr)? - &baseline
     } else {
         zeros()
     };
@@ -101,7 +149,8 @@ pub fn fast_maps(
     let ext = g.grown(hy, hx);
     let mut ch = WeightedDwell::<NV>::new(ext);
     // Two-stage pipeline: one thread integrates the vibration, this one splats its samples.
-    let stream = SampleStream::new(&exec, p, bonnet, mech, opts.sample_hz, opts.seed)?;
+    let stream = SampleStream::new(&exec, p, bonnet, mech, opts.sample_hz, opts.seed)?
+        .with_direction_lag(lag_mm);
     std::thread::scope(|scope| {
         let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<CouplingSample>>(4);
         scope.spawn(move || {

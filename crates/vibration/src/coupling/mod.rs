@@ -36,7 +36,7 @@ use serde::Serialize;
 
 pub use case::CouplingCase;
 pub use direct::{direct_removal, direct_removal_with, Vibrating};
-pub use fast::fast_maps;
+pub use fast::{direction_lag_path, fast_maps, fast_maps_lagged};
 pub use predict::{
     predict, predict_both, spindle_sweep, BonnetPrediction, MechanismResult, SweepRow,
 };

@@ -30,7 +30,9 @@ pub use fit::{
 };
 
 use crate::coupling::predict::{msf_band_rms_y, MechanismResult};
-use crate::coupling::{fast_maps, CouplingInput, CouplingOptions, MechanismMaps, Mechanisms};
+use crate::coupling::{
+    fast_maps_lagged, CouplingInput, CouplingOptions, MechanismMaps, Mechanisms,
+};
 use crate::error::VibrationError;
 use crate::params::{Bonnet, VibrationParams};
 use bonnetlab_process::Grid;
@@ -80,6 +82,8 @@ pub struct ForcingModel {
     pub pitch_mm: Option<f64>,
     /// The mechanism switches of the coupling runs.
     pub mechanisms: Mechanisms,
+    /// Servo lag of the run the model is built for, mm (0: the tool on its path).
+    pub lag_mm: f64,
     /// Coefficient maps (nm) of the monomials, per mechanism.
     coef: Vec<MechanismMaps>,
 }
@@ -113,6 +117,18 @@ impl ForcingModel {
         bonnet: Bonnet,
         opts: &CouplingOptions,
     ) -> Result<ForcingModel, VibrationError> {
+        ForcingModel::build_lagged(input, bonnet, opts, 0.0)
+    }
+
+    /// [`ForcingModel::build`] for a run whose tool trails its path by `lag_mm` along the
+    /// direction of travel (a calibrated servo lag): the coupling runs are
+    /// [`crate::coupling::fast_maps_lagged`]'s, the lag applied at the run's own clock.
+    pub fn build_lagged(
+        input: &CouplingInput<'_>,
+        bonnet: Bonnet,
+        opts: &CouplingOptions,
+        lag_mm: f64,
+    ) -> Result<ForcingModel, VibrationError> {
         let at = |f: f64, s: f64| -> Result<MechanismMaps, VibrationError> {
             let params = VibrationParams {
                 fn_n: f,
@@ -124,7 +140,7 @@ impl ForcingModel {
                 params: &params,
                 ..*input
             };
-            fast_maps(&inp, bonnet, opts)
+            fast_maps_lagged(&inp, bonnet, opts, lag_mm)
         };
         let r00 = at(0.0, 0.0)?;
         let r10 = at(1.0, 0.0)?;
@@ -149,6 +165,7 @@ impl ForcingModel {
             params: input.params.clone(),
             pitch_mm: input.pitch_mm,
             mechanisms: opts.mechanisms,
+            lag_mm,
             coef,
         })
     }
