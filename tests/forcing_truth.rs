@@ -142,10 +142,22 @@ fn check(f: &ForcingFit, tol: f64, what: &str, interval: bool) {
 ///
 /// With the lag the fitted forcing is 9 % high and its interval misses 5 N by 0.22 N: the lag
 /// shifts neighbouring raster lines ±0.3 mm along the scan, which changes how their imprints
-/// (about 2.9 mm period) add where the spot overlaps two lines: about +17 % imprint power in the
-/// band over the clean run's. The commanded-path model cannot have that, and the interval only
-/// carries the PSD's scatter; so the lagged case is held to the tolerance and not the interval
-/// (`compare` builds the forcing model on the calibrated lag's path for that reason).
+/// (about 2.9 mm period) add where the spot overlaps two lines: +17 % imprint power in the
+/// band over the clean run's (`lag_model_reproduces_the_lag_change_of_the_imprint`). The
+/// commanded-path model cannot have that, and the interval only carries the PSD's scatter; so
+/// the lagged case is held to the tolerance and not the interval.
+///
+/// Why the lag-aware model (`ForcingModel::build_lagged`, what `compare` uses) does not bring
+/// it to the truth yet, with 0.7 nm noise and the true TIF: 5.594 N on the run's 50 Hz log.
+/// Two model errors outside the lag remain, both measured against the exact deposition:
+/// (1) the clock: the coupling re-times the log under the acceleration limit, and the log's
+/// samples cut the raster's corners, so the re-timed run takes 65.59 s where the generator's
+/// (re-timing its fine motion) takes 64.85 s: the spindle phase from line to line, which sets
+/// how neighbouring imprints add, drifts (on the generator's motion the fit reads 5.335 N clean
+/// and 5.268 N lagged, and the exact deposition matches the truth to 0.1 % in every band bin);
+/// (2) the fast expansion's imprint power falls below the exact deposition's on the same clock
+/// by 6 / 16 / 24 / 35 % at 0.30 / 0.36 / 0.40 / 0.46 per mm (clean and lagged alike), which
+/// the fit makes up with forcing (+5-7 %).
 #[test]
 fn forcing_fit_recovers_the_true_forcing_on_exact_deposition() {
     let clean = case(None, 0.0);
@@ -211,8 +223,9 @@ fn moments(t: &dyn RateField) -> (f64, f64, f64) {
 /// where it is 0.126 / 0.039 / 0.012 / 0.0032 / 0.0005): interpolated -0.2 / +0.6 / +6.4 /
 /// +25 / +100 %; smooth model (sigma 1.3494 mm, beta 0.9991, peak 850.7 nm/s) +0.03 / +0.24 /
 /// +0.76 / +1.7 / +6.4 %. Forcing fitted with 0.7 nm noise (truth 5 N): true TIF 5.044 N,
-/// smooth 5.054 N, interpolated 4.352 N (-13 %); with the 0.3 mm lag and the model on the
-/// lagged path (what `compare` does): true 5.284 N, smooth 5.298 N, interpolated 4.646 N. (The
+/// smooth 5.054 N, interpolated 4.352 N (-13 %); with the 0.3 mm lag and the model with the
+/// lag at the run's clock (what `compare` does): true 5.594 N, smooth 5.602 N (with the moved
+/// and re-timed path before: 5.284 / 5.298 N, interpolated 4.646 N). (The
 /// noise-free cases are not held: with no noise the fit weighs model errors far below any
 /// measurement, and even the true TIF reads 4.78 N clean, 5.10 N lagged.)
 #[test]
@@ -254,7 +267,7 @@ fn spot_derived_tif_reads_the_forcing_as_the_true_tif_does() {
     }
     let fn_of = |lag: Option<f64>, tool: Tool| {
         let c = case_with(lag, 0.7, tool, lag.is_some());
-        let what = format!("{tool:?}, lag {lag:?} (model on the lagged path), 0.7 nm noise");
+        let what = format!("{tool:?}, lag {lag:?} (in the model too), 0.7 nm noise");
         fit(&c, &what).forcing.fn_n.unwrap()
     };
     fn_of(None, Tool::Spot(Rim::Interpolate));

@@ -121,16 +121,19 @@ fn sample_runs_built_in_effects_found_within_20_percent() {
 /// a raster ripple the vibration changes by a few per cent.
 ///
 /// Measured on the committed samples: σ1 after polishing 4.463 nm (original) and 4.312 nm
-/// (suppression), 2.21 / 2.20 nm before; difference −0.150 nm. With the spot's TIF from the
-/// smooth model (issue 14; it reads the forcing as the true TIF does, see
-/// `sample_runs_spot_tif_agrees_with_the_true_tif` and tests/forcing_truth.rs) the forcing is
-/// original 5.564 N [5.28, 5.86], suppression 4.709 N [3.64, 5.65] (truth 5 N both) and the
-/// shares normal_offset 1.320, dwell_execution 0.009 (vibration 1.329), removal_rate −0.059,
-/// path_offset −0.055, direction_lag −0.011, unexplained −0.204: this test FAILS. Main passed
-/// (4.77 N, 4.44 N, vibration 1.000) only through its interpolated spot TIF, whose transfer in
-/// the imprint band was 6-100 % high and read the forcing 12-15 % low; with the generator's true
-/// TIF the analysis gives 5.552 N, 4.704 N, vibration 1.339. What is left is in the forcing fit
-/// on the lagged original run (tests/forcing_truth.rs: +6 % with the true lag's path, true TIF).
+/// (suppression), 2.21 / 2.20 nm before; difference −0.150 nm. The forcing model of the lagged
+/// original run has the calibrated lag at the run's clock (`ForcingModel::build_lagged`):
+/// forcing original 5.818 N, suppression 4.709 N (truth 5 N both) and the shares
+/// normal_offset 1.441, dwell_execution 0.010 (vibration 1.451), removal_rate −0.059,
+/// path_offset −0.055, direction_lag −0.011, unexplained −0.327: this test FAILS. Before the
+/// lag was applied at the run's clock (the path's samples moved and then re-timed, which
+/// stretched the clock 4.09 s in 65.6 s) it read 5.564 N and 1.329; main passed (4.77 N,
+/// 4.44 N, vibration 1.000) only through its interpolated spot TIF, 12-15 % low. What is left
+/// is in the forcing model, not the lag (tests/forcing_truth.rs, measured against the exact
+/// deposition): the coupling re-times the 50 Hz log, whose samples cut the corners, to a
+/// clock 0.73 s longer than the generator's (65.59 vs 64.85 s), which moves the spindle phase
+/// from line to line; and the fast expansion's imprint power is 6-35 % below the exact
+/// deposition's over 0.30-0.46 per mm on the same clock.
 #[test]
 fn sample_runs_difference_given_to_vibration() {
     let runs: Vec<RunInput> = ["original", "suppression"]
@@ -185,8 +188,8 @@ fn vibration_share(c: &BonnetsComparison) -> f64 {
 /// Gaussian the runs were deposited with) give the same forcings and vibration share: the
 /// spot-derived TIF is not what decides the attribution.
 ///
-/// Measured: measured spot (smooth model: sigma 1.3494 mm, beta 0.999) original 5.564 N,
-/// suppression 4.709 N, vibration share 1.329; true TIF 5.552 N, 4.704 N, share 1.339. (Main's
+/// Measured: measured spot (smooth model: sigma 1.3494 mm, beta 0.999) original 5.818 N,
+/// suppression 4.709 N, vibration share 1.451; true TIF 5.810 N, 4.704 N, share 1.464. (Main's
 /// interpolated spot TIF, whose transfer in the imprint band was 6-100 % high, read 4.77 N and
 /// 4.44 N and a share of 1.000.)
 #[test]
