@@ -122,18 +122,17 @@ fn sample_runs_built_in_effects_found_within_20_percent() {
 ///
 /// Measured on the committed samples: σ1 after polishing 4.463 nm (original) and 4.312 nm
 /// (suppression), 2.21 / 2.20 nm before; difference −0.150 nm. The forcing model of the lagged
-/// original run has the calibrated lag at the run's clock (`ForcingModel::build_lagged`):
-/// forcing original 5.818 N, suppression 4.709 N (truth 5 N both) and the shares
-/// normal_offset 1.441, dwell_execution 0.010 (vibration 1.451), removal_rate −0.059,
-/// path_offset −0.055, direction_lag −0.011, unexplained −0.327: this test FAILS. Before the
-/// lag was applied at the run's clock (the path's samples moved and then re-timed, which
-/// stretched the clock 4.09 s in 65.6 s) it read 5.564 N and 1.329; main passed (4.77 N,
-/// 4.44 N, vibration 1.000) only through its interpolated spot TIF, 12-15 % low. What is left
-/// is in the forcing model, not the lag (tests/forcing_truth.rs, measured against the exact
-/// deposition): the coupling re-times the 50 Hz log, whose samples cut the corners, to a
-/// clock 0.73 s longer than the generator's (65.59 vs 64.85 s), which moves the spindle phase
-/// from line to line; and the fast expansion's imprint power is 6-35 % below the exact
-/// deposition's over 0.30-0.46 per mm on the same clock.
+/// original run has the calibrated lag (0.293 mm, truth 0.3) at the run's clock
+/// (`ForcingModel::build_lagged`), the coupling's clock from the log with the raster corners
+/// restored and the spindle-harmonic offset to fourth order (tests/forcing_truth.rs, against
+/// the exact deposition): forcing original 5.002 N, suppression 4.659 N (truth 5 N both) and the
+/// shares normal_offset 1.074, dwell_execution 0.002, interaction −0.014 (vibration 1.061),
+/// path_offset −0.052, removal_rate 0.035, direction_lag −0.011, unexplained −0.033.
+/// Before those two coupling fixes it read 5.818 N and 4.709 N, share 1.451 (failing): the
+/// log's chords re-timed to a clock 0.73 s longer than the run's, and a second-order expansion
+/// that put the imprint's power 7-36 % low over 0.30-0.46 per mm (more at the original run's
+/// larger offset swing than at the damped suppression run's); main passed (4.77 N, 4.44 N,
+/// 1.000) only through its interpolated spot TIF, 12-15 % low, cancelling them.
 #[test]
 fn sample_runs_difference_given_to_vibration() {
     let runs: Vec<RunInput> = ["original", "suppression"]
@@ -188,8 +187,8 @@ fn vibration_share(c: &BonnetsComparison) -> f64 {
 /// Gaussian the runs were deposited with) give the same forcings and vibration share: the
 /// spot-derived TIF is not what decides the attribution.
 ///
-/// Measured: measured spot (smooth model: sigma 1.3494 mm, beta 0.999) original 5.818 N,
-/// suppression 4.709 N, vibration share 1.451; true TIF 5.810 N, 4.704 N, share 1.464. (Main's
+/// Measured: measured spot (smooth model: sigma 1.3494 mm, beta 0.999) original 5.002 N,
+/// suppression 4.659 N, vibration share 1.061; true TIF 4.990 N, 4.652 N, share 1.075. (Main's
 /// interpolated spot TIF, whose transfer in the imprint band was 6-100 % high, read 4.77 N and
 /// 4.44 N and a share of 1.000.)
 #[test]
