@@ -95,8 +95,9 @@ fn node_inverse() -> [[f64; N_MONO]; N_MONO] {
             if r != c {
                 let m = a[r][c];
                 if m != 0.0 {
-                    for k in 0..2 * N_MONO {
-                        a[r][k] -= m * a[c][k];
+                    let pivot = a[c];
+                    for (v, p) in a[r].iter_mut().zip(pivot) {
+                        *v -= m * p;
                     }
                 }
             }
