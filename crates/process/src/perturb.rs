@@ -7,19 +7,20 @@
 //!   a(h0 + δ) / a0 and the peak rate scales as ((h0 + δ) / h0)^γ:
 //!   T(q; δ) = ((h0 + δ) / h0)^γ · T0(q · a0 / a(h0 + δ)), T0 any [`RateField`]. A lateral
 //!   displacement u along a map axis e moves it: T(q − u e; δ).
-//! - [`DerivativeKernels`]: the derivative kernels of T for a second-order expansion in (u, δ):
-//!   K_l = ∂T/∂l, K_ll = ∂²T/∂l², K_h = ∂T/∂δ, K_hh = ∂²T/∂δ², K_lh = ∂²T/∂l∂δ, and the
-//!   offset's third and fourth derivatives K_hhh, K_hhhh (the footprint's width enters the
+//! - [`DerivativeKernels`]: the derivative kernels of T for an expansion in (u, δ), second
+//!   order and δ to fourth: K_l = ∂T/∂l, K_ll = ∂²T/∂l², K_h = ∂T/∂δ, K_hh = ∂²T/∂δ²,
+//!   K_lh = ∂²T/∂l∂δ, K_hhh = ∂³T/∂δ³, K_hhhh = ∂⁴T/∂δ⁴ (the footprint's width enters the
 //!   transfer at f as exp(−2π²σ²s²f²): in the spindle imprint band of the sample run, 0.3-0.46
 //!   per mm, a 5 N forcing moves it far beyond second order, and a second-order expansion put
-//!   the imprint's power 7-36 % below the exact deposition's there), sampled on the map pitch (finite differences of the continuous model: lateral ones over one pixel, offset
-//!   ones over 5 % of h0 on pixel-area means, because a footprint with a hard edge has an offset
-//!   derivative concentrated on its rim).
+//!   the imprint's power 7-36 % below the exact deposition's there), sampled on the map pitch
+//!   (finite differences of the continuous model: lateral ones over one pixel, offset ones over
+//!   5 % of h0 on pixel-area means, because a footprint with a hard edge has an offset
+//!   derivative concentrated on its rim; the means taken back to point values to second order
+//!   in the pixel).
 //! - [`WeightedDwell`]: weighted dwell maps, N channels at once: every sample's dwell dt times a
 //!   weight per channel (u, u², δ, ...), Keys cubic splat (mass, centroid and second moment
-//!   kept). Convolved with
-//!   the derivative kernels they give the perturbation's removal (see [`convolve_channels`]);
-//!   the unperturbed removal is [`crate::removal::FastRemoval`]'s.
+//!   kept). Convolved with the derivative kernels they give the perturbation's removal (see
+//!   [`convolve_channels`]); the unperturbed removal is [`crate::removal::FastRemoval`]'s.
 //!
 //! The exact reference, independent of the expansion, is the process crate's one exact
 //! time-domain deposition, [`crate::modulated::deposit_exact_modulated`]: T(q − u e; δ) is the

@@ -138,7 +138,7 @@ fn splat(d: &mut Array2<f64>, u: f64, v: f64, w: f64) {
 /// The 2 x 2 bilinear splat of a point at fractional (row u, col v) on a `rows` x `cols` grid:
 /// calls `f(i, j, wi, wj)` for every tap inside the grid, with the row and column weights.
 /// Points beyond the outer pixel centres by a pixel or more get none. The one bilinear splat
-/// (the dwell map's, and the N-channel [`crate::perturb::WeightedDwell`]).
+/// (the dwell map's).
 #[inline]
 pub(crate) fn bilinear_taps(
     rows: usize,
