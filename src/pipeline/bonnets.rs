@@ -373,28 +373,6 @@ fn without_unmodelled_effects(
     Surface::with_mask(z, valid, removal.dx_mm, removal.dy_mm)
 }
 
-/// The path log with every sample moved back by `lag_mm` along its direction of travel (the
-/// executed position of a servo lag; the direction of the segment to the next sample, the last
-/// sample the previous segment's).
-fn lag_path(path: &PathLog, lag_mm: f64) -> Result<PathLog, bonnetlab_process::ProcessError> {
-    let n = path.len();
-    let (mut x, mut y) = (path.x_mm.clone(), path.y_mm.clone());
-    for k in 0..n {
-        let (a, b) = if k + 1 < n {
-            (k, k + 1)
-        } else {
-            (k.saturating_sub(1), k)
-        };
-        let (dx, dy) = (path.x_mm[b] - path.x_mm[a], path.y_mm[b] - path.y_mm[a]);
-        let d = dx.hypot(dy);
-        if d > 1e-12 {
-            x[k] -= lag_mm * dx / d;
-            y[k] -= lag_mm * dy / d;
-        }
-    }
-    PathLog::new(path.t_s.clone(), x, y)
-}
-
 /// Analyses one run.
 ///
 /// Calibration does not model vibration: given the raw maps it explains the spindle imprint
@@ -541,13 +519,11 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
     // A calibrated servo lag moves neighbouring raster lines in opposite directions along the
     // scan, which changes how their spindle imprints add where the spot covers two lines: the
     // commanded path's model misreads that as forcing. With a lag accepted, the forcing model is
-    // built on the lagged path (and the lag's removal is no longer taken out of the target).
-    let lagged = effect_num(&cal, "direction_lag", "lag_mm")
-        .filter(|l| l.is_finite() && *l != 0.0)
-        .map(|l| lag_path(&run.path, l))
-        .transpose()
-        .map_err(|e| perr(&e))?;
-    if let Some(lp) = &lagged {
+    // built for the lag (the tool moved back along the travel at the run's own clock: the
+    // spindle phase along each line is the run's) and the lag's removal is no longer taken out
+    // of the target.
+    let lagged = effect_num(&cal, "direction_lag", "lag_mm").filter(|l| l.is_finite() && *l != 0.0);
+    if let Some(lag_mm) = lagged {
         let rescaled;
         let tool_now = if scale != 1.0 {
             rescaled = scaled_tool_model(&run.tif, &tool, scale, dx, dy).map_err(|e| perr(&e))?;
@@ -557,10 +533,10 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
         };
         let inp = CouplingInput {
             tool: tool_now,
-            path: lp,
             ..input
         };
-        model = ForcingModel::build(&inp, run.bonnet, &opts.coupling).map_err(|e| perr(&e))?;
+        model = ForcingModel::build_lagged(&inp, run.bonnet, &opts.coupling, lag_mm)
+            .map_err(|e| perr(&e))?;
         let target =
             without_unmodelled_effects(&removal, &cal, &["direction_lag"]).map_err(|e| perr(&e))?;
         fit = infer_forcing(&model, &target, &opts.infer).map_err(|e| perr(&e))?;

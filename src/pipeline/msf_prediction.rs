@@ -69,7 +69,8 @@ zeta_e = eta / 2 = 0.0575 in both principal directions and a series compliance (
 50 N/mm, assumed) in front of the inflated bonnet's contact stiffness. Removal depends on the \
 offset non-linearly (spot radius and peak pressure grow with offset, Hertzian exponent 0.5); the \
 four mechanisms (normal offset, lateral spot jitter, slow envelope, acceleration-limited dwell \
-execution) are computed with the fast second-order expansion of the vibration crate, which is \
+execution) are computed with the fast expansion of the vibration crate (second order, the \
+offset to fourth), which is \
 validated against direct deposition of the instantaneous TIF. Shares are band powers over the \
 summed power of the mechanisms and their interaction, so they describe uncorrelated parts; the \
 prediction is for a uniform raster of the whole part (no dwell correction), not a fit to the \

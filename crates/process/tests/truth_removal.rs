@@ -480,18 +480,9 @@ fn analytic_tifs_fast_mode_matches_exact_deposition() {
 
 /// The issue's tolerances for a measured spot: sigma_1 within 1 % when the spot is measured at
 /// a quarter of the map pixel or finer, within 2 % otherwise; removal RMS within 0.5 %.
-fn spot_tolerances(truth: &Truth, fineness: f64) -> (f64, f64) {
+fn spot_tolerances(fineness: f64) -> (f64, f64) {
     let s1: f64 = if fineness >= 4.0 { 0.01 } else { 0.02 };
-    // A spot coarser than the map (not a case the issue sets a figure for): the 0.6 mm sigma
-    // Gaussian at 0.65 mm pixels is sampled at about one pixel per sigma, and its removal RMS
-    // misses by up to 1.01 % (sigma_1 stays within 0.9 %); the bonnet shape fitted to it is
-    // rejected (its residual is many times the noise) and the pixels are interpolated. Held
-    // to what is measured, with a margin.
-    let rms = match truth {
-        Truth::Gaussian(_) if fineness < 1.0 => 0.0125,
-        _ => 0.005,
-    };
-    (rms, s1)
+    (0.005, s1)
 }
 
 #[test]
@@ -531,7 +522,7 @@ fn measured_spots_fast_mode_matches_exact_deposition() {
                                 ""
                             }
                         );
-                        let (rms_tol, s1_tol) = spot_tolerances(&truth, fineness);
+                        let (rms_tol, s1_tol) = spot_tolerances(fineness);
                         if o.rms_err > rms_tol || o.s1_err.abs() > s1_tol {
                             fails.push(label.clone());
                         }

@@ -15,7 +15,7 @@
 //! Cross terms between mechanisms are kept in `interaction`.
 //!
 //! [`fast`] takes the unperturbed removal from the process crate's fast removal model and the
-//! vibration's part from a second-order expansion (FFT convolutions of weighted dwell maps with
+//! vibration's part from an expansion, second order and the offset to fourth (FFT convolutions of weighted dwell maps with
 //! derivative kernels, [`bonnetlab_process::perturb`]); [`direct`] deposits the instantaneous
 //! TIF sub-step by sub-step with the process crate's one exact deposition (the reference,
 //! independent of the expansion). [`predict`] turns
@@ -36,7 +36,7 @@ use serde::Serialize;
 
 pub use case::CouplingCase;
 pub use direct::{direct_removal, direct_removal_with, Vibrating};
-pub use fast::fast_maps;
+pub use fast::{direction_lag_path, fast_maps, fast_maps_lagged};
 pub use predict::{
     predict, predict_both, spindle_sweep, BonnetPrediction, MechanismResult, SweepRow,
 };

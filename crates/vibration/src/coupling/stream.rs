@@ -41,6 +41,7 @@ pub struct SampleStream<'a> {
     e_lat: [f64; 2],
     e_nrm: [f64; 2],
     transfer: f64,
+    lag_mm: f64,
 }
 
 impl<'a> SampleStream<'a> {
@@ -107,7 +108,17 @@ impl<'a> SampleStream<'a> {
             e_lat: [e1[0], e2[0]],
             e_nrm: [e1[1], e2[1]],
             transfer: p.offset_transfer(bonnet),
+            lag_mm: 0.0,
         })
+    }
+
+    /// The same stream with the tool centre moved back by `lag_mm` along the path's direction
+    /// of travel at every sample (a servo lag: the executed position trails the path at the
+    /// same instant). Only the positions move: the clock, hence the spindle phase, and the
+    /// ring-down after the path's velocity changes are the path's own.
+    pub fn with_direction_lag(mut self, lag_mm: f64) -> Self {
+        self.lag_mm = lag_mm;
+        self
     }
 
     /// Number of samples the stream yields.
@@ -126,10 +137,14 @@ impl<'a> SampleStream<'a> {
         }
         let k = self.seg;
         let f = ((t - p.t_s[k]) / (p.t_s[k + 1] - p.t_s[k])).clamp(0.0, 1.0);
-        (
-            p.x_mm[k] + f * (p.x_mm[k + 1] - p.x_mm[k]),
-            p.y_mm[k] + f * (p.y_mm[k + 1] - p.y_mm[k]),
-        )
+        let (dx, dy) = (p.x_mm[k + 1] - p.x_mm[k], p.y_mm[k + 1] - p.y_mm[k]);
+        let (mut x, mut y) = (p.x_mm[k] + f * dx, p.y_mm[k] + f * dy);
+        let d = dx.hypot(dy);
+        if self.lag_mm != 0.0 && d > 1e-12 {
+            x -= self.lag_mm * dx / d;
+            y -= self.lag_mm * dy / d;
+        }
+        (x, y)
     }
 }
 

@@ -2,12 +2,14 @@
 //! difference between two bonnets' runs (issue 16).
 //!
 //! - [`ForcingModel`]: the coupling's fast removal prediction as an exact polynomial in the
-//!   unknown forcing. The fast expansion is quadratic in the displacements, and the
+//!   unknown forcing. The fast expansion is quadratic in the displacements but for the
+//!   spindle-harmonic offset, carried to fourth order, and the
 //!   displacements are linear in the spindle-harmonic amplitude `fn_n` (N) and in the broadband
 //!   force RMS `noise_force_rms_n` (N) (the ring-down after path velocity changes does not depend
 //!   on either), so every mechanism map is `Σ_k w_k C_k` with monomials
-//!   `w = [1, F, S, F², F S, S²]` (F = fn_n, S = noise_force_rms_n). Six coupling runs at
-//!   (F, S) = (0,0), (1,0), (2,0), (0,1), (0,2), (1,1) N give the coefficient maps exactly; any
+//!   `w = [1, F, S, F², F S, S², F³, F⁴]` (F = fn_n, S = noise_force_rms_n). Eight coupling
+//!   runs at (F, S) = (0,0), (1,0), (2,0), (0,1), (0,2), (1,1), (3,0), (4,0) N give the
+//!   coefficient maps exactly; any
 //!   forcing is then a weighted sum, no further coupling run.
 //! - [`fit`]: the forcing fitted to a measured removal map through its one-sided X and Y PSDs
 //!   (the PSD of a sum of fixed maps is a quadratic form in the weights), with a free removal-rate
@@ -30,7 +32,9 @@ pub use fit::{
 };
 
 use crate::coupling::predict::{msf_band_rms_y, MechanismResult};
-use crate::coupling::{fast_maps, CouplingInput, CouplingOptions, MechanismMaps, Mechanisms};
+use crate::coupling::{
+    fast_maps_lagged, CouplingInput, CouplingOptions, MechanismMaps, Mechanisms,
+};
 use crate::error::VibrationError;
 use crate::params::{Bonnet, VibrationParams};
 use bonnetlab_process::Grid;
@@ -40,18 +44,70 @@ use ndarray::Array2;
 use serde::Serialize;
 
 /// Number of monomials of the forcing polynomial.
-pub const N_MONO: usize = 6;
+pub const N_MONO: usize = 8;
 
-/// Monomials `[1, F, S, F², F S, S²]` at spindle-harmonic amplitude F and broadband RMS S (N).
+/// Monomials `[1, F, S, F², F S, S², F³, F⁴]` at spindle-harmonic amplitude F and broadband
+/// RMS S (N).
 pub fn monomials(fn_n: f64, noise_n: f64) -> [f64; N_MONO] {
+    let f2 = fn_n * fn_n;
     [
         1.0,
         fn_n,
         noise_n,
-        fn_n * fn_n,
+        f2,
         fn_n * noise_n,
         noise_n * noise_n,
+        f2 * fn_n,
+        f2 * f2,
     ]
+}
+
+/// The forcings (F, S) of the coupling runs that give the coefficient maps.
+const NODES: [(f64, f64); N_MONO] = [
+    (0.0, 0.0),
+    (1.0, 0.0),
+    (2.0, 0.0),
+    (0.0, 1.0),
+    (0.0, 2.0),
+    (1.0, 1.0),
+    (3.0, 0.0),
+    (4.0, 0.0),
+];
+
+/// Inverse of the monomials' matrix at [`NODES`] (row i: the monomials at node i), by
+/// Gauss-Jordan elimination with partial pivoting: coefficient k is Σ_i inv[k][i] · run_i.
+fn node_inverse() -> [[f64; N_MONO]; N_MONO] {
+    let mut a = [[0.0; 2 * N_MONO]; N_MONO];
+    for (i, &(f, s)) in NODES.iter().enumerate() {
+        a[i][..N_MONO].copy_from_slice(&monomials(f, s));
+        a[i][N_MONO + i] = 1.0;
+    }
+    for c in 0..N_MONO {
+        let p = (c..N_MONO)
+            .max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))
+            .unwrap_or(c);
+        a.swap(c, p);
+        let d = a[c][c];
+        for v in a[c].iter_mut() {
+            *v /= d;
+        }
+        for r in 0..N_MONO {
+            if r != c {
+                let m = a[r][c];
+                if m != 0.0 {
+                    let pivot = a[c];
+                    for (v, p) in a[r].iter_mut().zip(pivot) {
+                        *v -= m * p;
+                    }
+                }
+            }
+        }
+    }
+    let mut inv = [[0.0; N_MONO]; N_MONO];
+    for (k, row) in inv.iter_mut().enumerate() {
+        row.copy_from_slice(&a[k][N_MONO..]);
+    }
+    inv
 }
 
 /// The `predicted` object of `compare`'s JSON at a given forcing (shared/spec/interfaces.md).
@@ -80,6 +136,8 @@ pub struct ForcingModel {
     pub pitch_mm: Option<f64>,
     /// The mechanism switches of the coupling runs.
     pub mechanisms: Mechanisms,
+    /// Servo lag of the run the model is built for, mm (0: the tool on its path).
+    pub lag_mm: f64,
     /// Coefficient maps (nm) of the monomials, per mechanism.
     coef: Vec<MechanismMaps>,
 }
@@ -105,13 +163,25 @@ fn combine(maps: &[&MechanismMaps], w: &[f64]) -> MechanismMaps {
 }
 
 impl ForcingModel {
-    /// Six fast coupling runs of `input` for `bonnet` (the forcing values of `input.params` are
+    /// Eight fast coupling runs of `input` for `bonnet` (the forcing values of `input.params` are
     /// replaced; every other parameter, the path, the TIF and the mechanism switches are the
     /// run's).
     pub fn build(
         input: &CouplingInput<'_>,
         bonnet: Bonnet,
         opts: &CouplingOptions,
+    ) -> Result<ForcingModel, VibrationError> {
+        ForcingModel::build_lagged(input, bonnet, opts, 0.0)
+    }
+
+    /// [`ForcingModel::build`] for a run whose tool trails its path by `lag_mm` along the
+    /// direction of travel (a calibrated servo lag): the coupling runs are
+    /// [`crate::coupling::fast_maps_lagged`]'s, the lag applied at the run's own clock.
+    pub fn build_lagged(
+        input: &CouplingInput<'_>,
+        bonnet: Bonnet,
+        opts: &CouplingOptions,
+        lag_mm: f64,
     ) -> Result<ForcingModel, VibrationError> {
         let at = |f: f64, s: f64| -> Result<MechanismMaps, VibrationError> {
             let params = VibrationParams {
@@ -124,24 +194,16 @@ impl ForcingModel {
                 params: &params,
                 ..*input
             };
-            fast_maps(&inp, bonnet, opts)
+            fast_maps_lagged(&inp, bonnet, opts, lag_mm)
         };
-        let r00 = at(0.0, 0.0)?;
-        let r10 = at(1.0, 0.0)?;
-        let r20 = at(2.0, 0.0)?;
-        let r01 = at(0.0, 1.0)?;
-        let r02 = at(0.0, 2.0)?;
-        let r11 = at(1.0, 1.0)?;
-        let all = [&r00, &r10, &r20, &r01, &r02, &r11];
-        // Rows: coefficients of [1, F, S, F², F S, S²] from the six evaluations.
-        let rows: [[f64; 6]; N_MONO] = [
-            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            [-1.5, 2.0, -0.5, 0.0, 0.0, 0.0],
-            [-1.5, 0.0, 0.0, 2.0, -0.5, 0.0],
-            [0.5, -1.0, 0.5, 0.0, 0.0, 0.0],
-            [1.0, -1.0, 0.0, -1.0, 0.0, 1.0],
-            [0.5, 0.0, 0.0, -1.0, 0.5, 0.0],
-        ];
+        let runs = NODES
+            .iter()
+            .map(|&(f, s)| at(f, s))
+            .collect::<Result<Vec<_>, _>>()?;
+        let all: Vec<&MechanismMaps> = runs.iter().collect();
+        // Coefficients of the monomials from the runs at the nodes (exact: the expansion is a
+        // polynomial of these degrees in the forcing).
+        let rows = node_inverse();
         let coef = rows.iter().map(|w| combine(&all, w)).collect();
         Ok(ForcingModel {
             grid: input.grid,
@@ -149,6 +211,7 @@ impl ForcingModel {
             params: input.params.clone(),
             pitch_mm: input.pitch_mm,
             mechanisms: opts.mechanisms,
+            lag_mm,
             coef,
         })
     }
