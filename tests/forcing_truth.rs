@@ -32,6 +32,21 @@ use bonnetlab_vibration::infer::{infer_forcing, ForcingFit, ForcingModel};
 use bonnetlab_vibration::params::VibrationParams;
 use ndarray::Array2;
 
+/// The run made with the recipe's vibration at a 5 N forcing and at none (the same seed).
+fn forced_and_unforced(
+    spec: &bonnetlab::pipeline::recipe_samples::RecipeRunSpec,
+    cfg: &bonnetlab_calibrate::synth::SynthConfig,
+) -> (SynthRun, SynthRun) {
+    let at = |f: f64| {
+        let v = VibrationParams {
+            fn_n: f,
+            ..recipe_vibration()
+        };
+        generate_run_with(spec, cfg, &v).unwrap()
+    };
+    (at(5.0), at(0.0))
+}
+
 /// Truth of the spindle-harmonic forcing, N.
 const TRUE_FN_N: f64 = 5.0;
 
@@ -180,41 +195,42 @@ fn forcing_fit_recovers_the_true_forcing_on_exact_deposition() {
     }
 }
 
-/// |MTF| (the TIF's transform over its volume) along X at `f` per mm, by a direct sum over a
-/// 0.02 mm grid (odd-symmetric part cancels only for a centred TIF, so the modulus is taken).
-fn mtf_x(t: &dyn RateField, f: f64) -> f64 {
+/// Calls `f(x, y, rate)` at every node of a 0.02 mm grid over the field's extent; returns the
+/// node spacing (mm).
+fn over_nodes(t: &dyn RateField, mut f: impl FnMut(f64, f64, f64)) -> f64 {
     let (hx, hy) = t.half_extent_mm();
     let d = 0.02;
     let (nx, ny) = ((hx / d).ceil() as i64, (hy / d).ceil() as i64);
-    let (mut v, mut re, mut im) = (0.0, 0.0, 0.0);
     for i in -ny..=ny {
         for j in -nx..=nx {
             let (x, y) = (j as f64 * d, i as f64 * d);
-            let r = t.rate_at_mm(x, y);
-            let a = 2.0 * std::f64::consts::PI * f * x;
-            v += r;
-            re += r * a.cos();
-            im += r * a.sin();
+            f(x, y, t.rate_at_mm(x, y));
         }
     }
+    d
+}
+
+/// |MTF| (the TIF's transform over its volume) along X at `f` per mm, by a direct sum over a
+/// 0.02 mm grid (odd-symmetric part cancels only for a centred TIF, so the modulus is taken).
+fn mtf_x(t: &dyn RateField, f: f64) -> f64 {
+    let (mut v, mut re, mut im) = (0.0, 0.0, 0.0);
+    over_nodes(t, |x, _, r| {
+        let a = 2.0 * std::f64::consts::PI * f * x;
+        v += r;
+        re += r * a.cos();
+        im += r * a.sin();
+    });
     re.hypot(im) / v
 }
 
 /// Peak (nm/s), volume (nm mm^2/s) and RMS radius along X (mm) of a field.
 fn moments(t: &dyn RateField) -> (f64, f64, f64) {
-    let (hx, hy) = t.half_extent_mm();
-    let d = 0.02;
-    let (nx, ny) = ((hx / d).ceil() as i64, (hy / d).ceil() as i64);
     let (mut peak, mut v, mut xx) = (0.0f64, 0.0, 0.0);
-    for i in -ny..=ny {
-        for j in -nx..=nx {
-            let (x, y) = (j as f64 * d, i as f64 * d);
-            let r = t.rate_at_mm(x, y);
-            peak = peak.max(r);
-            v += r;
-            xx += r * x * x;
-        }
-    }
+    let d = over_nodes(t, |x, _, r| {
+        peak = peak.max(r);
+        v += r;
+        xx += r * x * x;
+    });
     (peak, v * d * d, (xx / v).sqrt())
 }
 
@@ -326,14 +342,7 @@ fn lag_model_reproduces_the_lag_change_of_the_imprint() {
             cfg.effects = l
                 .map(|l| vec![Injected::DirectionLag { lag_mm: l }])
                 .unwrap_or_default();
-            let gen = |f: f64| {
-                let v = VibrationParams {
-                    fn_n: f,
-                    ..recipe_vibration()
-                };
-                generate_run_with(&spec, &cfg, &v).unwrap()
-            };
-            let (r5, r0) = (gen(5.0), gen(0.0));
+            let (r5, r0) = forced_and_unforced(&spec, &cfg);
             let grid = Grid::of(&r5.before).unwrap();
             let tool = tool_model(&r5, Tool::True, grid.dx_mm, grid.dy_mm);
             let params = recipe_vibration();
@@ -466,14 +475,7 @@ fn fast_imprint_power_tracks_exact_deposition_in_the_band() {
     let spec = recipe_runs(RECIPE_SEED)[0].clone();
     let mut cfg = synth_config(&spec);
     cfg.effects.clear();
-    let gen = |f: f64| {
-        let v = VibrationParams {
-            fn_n: f,
-            ..recipe_vibration()
-        };
-        generate_run_with(&spec, &cfg, &v).unwrap()
-    };
-    let (r5, r0) = (gen(5.0), gen(0.0));
+    let (r5, r0) = forced_and_unforced(&spec, &cfg);
     let grid = Grid::of(&r5.before).unwrap();
     let tool = tool_model(&r5, Tool::True, grid.dx_mm, grid.dy_mm);
     let imprint = |path: &PathLog, o: &CouplingOptions| {

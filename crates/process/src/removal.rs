@@ -108,24 +108,7 @@ fn keys_weights(f: f64) -> [f64; 4] {
 /// Adds `w` at fractional (row u, col v) with 4 x 4 Keys cubic weights.
 fn splat_cubic(d: &mut Array2<f64>, u: f64, v: f64, w: f64) {
     let (r, c) = d.dim();
-    if !(u > -2.0 && v > -2.0 && u < r as f64 + 1.0 && v < c as f64 + 1.0) {
-        return;
-    }
-    let (i0, j0) = (u.floor() as isize, v.floor() as isize);
-    let (wu, wv) = (keys_weights(u - i0 as f64), keys_weights(v - j0 as f64));
-    for (a, wi) in wu.iter().enumerate() {
-        let i = i0 - 1 + a as isize;
-        if i < 0 || i as usize >= r {
-            continue;
-        }
-        let mut row = d.row_mut(i as usize);
-        for (b, wj) in wv.iter().enumerate() {
-            let j = j0 - 1 + b as isize;
-            if j >= 0 && (j as usize) < c {
-                row[j as usize] += w * wi * wj;
-            }
-        }
-    }
+    cubic_taps(r, c, u, v, |i, j, wi, wj| d[(i, j)] += w * wi * wj);
 }
 
 /// Adds `w` at fractional (row u, col v) with bilinear weights.

@@ -379,6 +379,14 @@ mod tests {
     use crate::tif::bonnet::BonnetTif;
     use crate::tif::{BonnetTifParams, RateField};
 
+    /// `f(x, y)` (mm from the centre) on an `n` x `n` map of `px` pixels centred at (row, col)
+    /// `c`.
+    fn sampled(n: usize, px: f64, c: (f64, f64), f: impl Fn(f64, f64) -> f64) -> Array2<f64> {
+        Array2::from_shape_fn((n, n), |(i, j)| {
+            f((j as f64 - c.1) * px, (i as f64 - c.0) * px)
+        })
+    }
+
     #[test]
     fn recovers_a_hertz_bonnet_from_coarse_pixels() {
         let mut p = BonnetTifParams::paper(10.0);
@@ -386,9 +394,7 @@ mod tests {
         let m = BonnetTif::new(&p).unwrap();
         let (px, n) = (0.5, 25usize);
         let (uc, vc) = (12.3, 11.6);
-        let rate = Array2::from_shape_fn((n, n), |(i, j)| {
-            m.rate_at_mm((j as f64 - vc) * px, (i as f64 - uc) * px)
-        });
+        let rate = sampled(n, px, (uc, vc), |x, y| m.rate_at_mm(x, y));
         let use_px = Array2::from_elem((n, n), true);
         let start = FitStart {
             centre: (12.0, 12.0),
@@ -413,9 +419,7 @@ mod tests {
             sigma_mm: 0.6,
             beta: 1.0,
         };
-        let rate = Array2::from_shape_fn((n, n), |(i, j)| {
-            g.rate_at((j as f64 - vc) * px, (i as f64 - uc) * px)
-        });
+        let rate = sampled(n, px, (uc, vc), |x, y| g.rate_at(x, y));
         let use_px = Array2::from_elem((n, n), true);
         let start = FitStart {
             centre: (10.0, 10.0),
@@ -433,9 +437,7 @@ mod tests {
         assert!((r / (0.6 * (2.0 * 1e6f64.ln()).sqrt()) - 1.0).abs() < 1e-4);
         // A flat-topped one (beta 2) from the same start.
         let g2 = SmoothShape { beta: 2.0, ..g };
-        let rate2 = Array2::from_shape_fn((n, n), |(i, j)| {
-            g2.rate_at((j as f64 - vc) * px, (i as f64 - uc) * px)
-        });
+        let rate2 = sampled(n, px, (uc, vc), |x, y| g2.rate_at(x, y));
         let f2 = fit_smooth(&rate2, &use_px, px, px, start, 5.0).unwrap();
         assert!((f2.shape.beta - 2.0).abs() < 1e-4, "{f2:?}");
         assert!((f2.shape.sigma_mm / 0.6 - 1.0).abs() < 1e-4, "{f2:?}");
