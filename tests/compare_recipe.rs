@@ -172,10 +172,12 @@ fn within(x: f64, truth: f64, tol: f64) -> bool {
 /// Two runs of the same bonnet, forcing (5 N at the x2 resonance) and path; the only
 /// difference is the robot damping (ζ 0.05 vs 0.1075).
 ///
-/// Measured: calibration (vibration taken back) accepts no effect in either run; fitted
-/// 5.04 N [4.71, 5.40] and 5.21 N [4.84, 5.61]; one shared forcing 5.13 N (p = 0.42);
-/// σ1 B − A = +0.141 nm; normal_offset 0.992 (significant), all vibration mechanisms 0.996,
-/// removal_rate −0.103 (not significant), unexplained 0.11.
+/// Measured (session 9, after the coupling's clock and 4th-order imprint were fixed against
+/// exact deposition): calibration (vibration taken back) accepts no effect in either run;
+/// fitted 5.08 N [4.82, 5.35] and 5.08 N [4.73, 5.44]; one shared forcing 5.09 N (p = 0.65);
+/// σ1 B − A = +0.141 nm; normal_offset 1.156 (significant), all vibration mechanisms 1.159,
+/// removal_rate −0.266 (not significant), unexplained 0.107. Before the fix: 5.04 and
+/// 5.21 N, shared 5.13 N (p = 0.42), normal_offset 0.992, removal_rate −0.103.
 #[test]
 fn damping_pair_forcing_within_30_percent_and_difference_attributed_to_vibration() {
     let t = tif(1.0);
