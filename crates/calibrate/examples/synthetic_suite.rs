@@ -3,6 +3,8 @@
 //! floor and the wall time, as a Markdown table on stdout.
 //!
 //!     cargo run --release -p bonnetlab-calibrate --example synthetic_suite
+//!     cargo run --release -p bonnetlab-calibrate --example synthetic_suite -- "null"   (only the
+//!     runs whose name contains "null")
 //!
 //! `cpu (s)` is the process's user + system time over the calibration (all threads, from
 //! /proc/self/stat at 100 ticks per second; empty where it cannot be read): on a shared
@@ -116,7 +118,12 @@ fn main() {
     ];
     println!("| run | seed | accepted | final residual (nm) | noise floor (nm) | residual / floor | wall (s) | cpu (s) |");
     println!("|---|---|---|---|---|---|---|---|");
+    // An optional argument keeps only the runs whose name contains it (for profiling one run).
+    let only = std::env::args().nth(1);
     for (name, cfg) in cases {
+        if only.as_ref().is_some_and(|o| !name.contains(o.as_str())) {
+            continue;
+        }
         let run = match generate(&cfg) {
             Ok(r) => r,
             Err(e) => {

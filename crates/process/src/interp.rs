@@ -121,6 +121,65 @@ pub fn catmull_rom(a: &Array2<f64>, u: f64, v: f64) -> f64 {
     s
 }
 
+/// [`catmull_rom`] of `a` along one line, in two steps: [`catmull_rom_across`] interpolates
+/// across the line once (row `u`, or column `v` when not `along_rows`), and
+/// [`catmull_rom_on_line`] then interpolates along it at any number of points, four taps each.
+/// Returns false (and leaves `line` empty) when the line lies off the array, where the
+/// interpolant is 0.
+pub fn catmull_rom_across(a: &Array2<f64>, along_rows: bool, u: f64, line: &mut Vec<f64>) -> bool {
+    line.clear();
+    let (r, c) = a.dim();
+    let (n_across, n_along) = if along_rows { (r, c) } else { (c, r) };
+    if !u.is_finite() || u <= -1.0 || u >= n_across as f64 {
+        return false;
+    }
+    let i0 = u.floor() as isize;
+    let wi = catmull_rom_weights(u - i0 as f64);
+    line.resize(n_along, 0.0);
+    for (p, wp) in wi.iter().enumerate() {
+        let ii = i0 - 1 + p as isize;
+        if ii < 0 || ii >= n_across as isize {
+            continue;
+        }
+        let lane = if along_rows {
+            a.row(ii as usize)
+        } else {
+            a.column(ii as usize)
+        };
+        for (l, x) in line.iter_mut().zip(lane.iter()) {
+            *l += wp * x;
+        }
+    }
+    true
+}
+
+/// The cubic interpolant of a line from [`catmull_rom_across`] at fractional position `v`
+/// (0 beyond one sample past either end; taps off the line count as 0).
+#[inline]
+pub fn catmull_rom_on_line(line: &[f64], v: f64) -> f64 {
+    let n = line.len();
+    if !v.is_finite() || v <= -1.0 || v >= n as f64 {
+        return 0.0;
+    }
+    let j0 = v.floor() as isize;
+    let wj = catmull_rom_weights(v - j0 as f64);
+    if j0 >= 1 && j0 + 2 < n as isize {
+        let j0 = j0 as usize;
+        return wj[0] * line[j0 - 1]
+            + wj[1] * line[j0]
+            + wj[2] * line[j0 + 1]
+            + wj[3] * line[j0 + 2];
+    }
+    let mut s = 0.0;
+    for (q, wq) in wj.iter().enumerate() {
+        let jj = j0 - 1 + q as isize;
+        if jj >= 0 && jj < n as isize {
+            s += wq * line[jj as usize];
+        }
+    }
+    s
+}
+
 /// Band-limited (Fourier) upsampling of `a` by an integer factor: sample (m, n) of the result is
 /// the trigonometric interpolant of `a` at (m / factor, n / factor). The array is taken as one
 /// period, so it should fall to (nearly) the same level on all borders (a spot's surround).

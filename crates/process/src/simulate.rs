@@ -158,6 +158,9 @@ impl RateField for ToolModel {
     fn volume_rate_nm_mm2_per_s(&self) -> Option<f64> {
         self.field().volume_rate_nm_mm2_per_s()
     }
+    fn rates_along(&self, along_x: bool, c: f64, t: &[f64], out: &mut [f64]) {
+        self.field().rates_along(along_x, c, t, out)
+    }
 }
 
 /// A predicted run.

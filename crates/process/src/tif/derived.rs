@@ -79,6 +79,45 @@ impl RateField for Derived {
         }
     }
 
+    fn rates_along(&self, along_x: bool, c: f64, t: &[f64], out: &mut [f64]) {
+        let (s, h) = (self.scale, self.step);
+        // The base along the line at scale `s2`, the line moved by `dc` across and `dt` along.
+        let mut buf = Vec::with_capacity(t.len());
+        let mut lo = vec![0.0; t.len()];
+        let mut base_along = |s2: f64, dc: f64, dt: f64, o: &mut [f64]| {
+            buf.clear();
+            buf.extend(t.iter().map(|&p| (p + dt) / s2));
+            self.base.rates_along(along_x, (c + dc) / s2, &buf, o);
+        };
+        // (across, along) offsets of the two samples of a difference along x or y.
+        let pair = |on_line: bool| {
+            if on_line {
+                ((0.0, h), (0.0, -h))
+            } else {
+                ((h, 0.0), (-h, 0.0))
+            }
+        };
+        match self.channel {
+            Channel::Value => base_along(s, 0.0, 0.0, out),
+            Channel::Dx | Channel::Dy => {
+                let ((c1, t1), (c2, t2)) = pair((self.channel == Channel::Dx) == along_x);
+                base_along(s, c1, t1, out);
+                base_along(s, c2, t2, &mut lo);
+                for (o, l) in out.iter_mut().zip(&lo) {
+                    *o = (*o - l) / (2.0 * h);
+                }
+            }
+            Channel::Ds => {
+                let ds = h * s;
+                base_along(s + ds, 0.0, 0.0, out);
+                base_along(s - ds, 0.0, 0.0, &mut lo);
+                for (o, l) in out.iter_mut().zip(&lo) {
+                    *o = (*o - l) / (2.0 * ds);
+                }
+            }
+        }
+    }
+
     fn half_extent_mm(&self) -> (f64, f64) {
         let (ex, ey) = self.base.half_extent_mm();
         let (s, h) = (self.scale, self.step);

@@ -42,6 +42,7 @@ use super::bonnet::BonnetShape;
 use super::spotfit::{fit_shape, fit_smooth, FitStart, SmoothShape};
 use super::{RateField, Tif};
 use crate::error::ProcessError;
+use crate::interp::{catmull_rom_across, catmull_rom_on_line};
 use bonnetlab_surface::fill::fill_invalid;
 use bonnetlab_surface::form::{evaluate_fit, fit_terms};
 use bonnetlab_surface::{Surface, Term};
@@ -453,12 +454,47 @@ impl MeasuredTif {
 
 impl RateField for MeasuredTif {
     fn rate_at_mm(&self, dx_mm: f64, dy_mm: f64) -> f64 {
+        self.rate_with(dx_mm, dy_mm, |u, v| {
+            crate::interp::catmull_rom(&self.rate, u, v)
+        })
+    }
+
+    fn rates_along(&self, along_x: bool, c: f64, t: &[f64], out: &mut [f64]) {
+        // Across the line once, then four taps per point along it.
+        let mut line = Vec::new();
+        let live = if along_x {
+            catmull_rom_across(&self.rate, true, self.centre.0 + c / self.dy_mm, &mut line)
+        } else {
+            catmull_rom_across(&self.rate, false, self.centre.1 + c / self.dx_mm, &mut line)
+        };
+        let along = |u: f64, v: f64| match (live, along_x) {
+            (false, _) => 0.0,
+            (true, true) => catmull_rom_on_line(&line, v),
+            (true, false) => catmull_rom_on_line(&line, u),
+        };
+        for (o, &p) in out.iter_mut().zip(t) {
+            *o = if along_x {
+                self.rate_with(p, c, along)
+            } else {
+                self.rate_with(c, p, along)
+            };
+        }
+    }
+
+    fn half_extent_mm(&self) -> (f64, f64) {
+        (self.radius_mm, self.radius_mm)
+    }
+}
+
+impl MeasuredTif {
+    /// The rate at (dx, dy) mm from the tool centre, `samples(u, v)` the interpolant of the
+    /// (residual) samples at fractional (row, column) of the spot map.
+    #[inline]
+    fn rate_with(&self, dx_mm: f64, dy_mm: f64, samples: impl Fn(f64, f64) -> f64) -> f64 {
         let r2 = dx_mm * dx_mm + dy_mm * dy_mm;
         if r2 > self.radius_mm * self.radius_mm {
             return 0.0;
         }
-        let u = self.centre.0 + dy_mm / self.dy_mm;
-        let v = self.centre.1 + dx_mm / self.dx_mm;
         let fitted = match (&self.radial, &self.model) {
             (Some(t), _) => t.at(r2.sqrt()),
             (None, Some(m)) => m.rate_at(dx_mm, dy_mm),
@@ -468,11 +504,9 @@ impl RateField for MeasuredTif {
         if w == 0.0 {
             return fitted;
         }
-        fitted + w * crate::interp::catmull_rom(&self.rate, u, v)
-    }
-
-    fn half_extent_mm(&self) -> (f64, f64) {
-        (self.radius_mm, self.radius_mm)
+        let u = self.centre.0 + dy_mm / self.dy_mm;
+        let v = self.centre.1 + dx_mm / self.dx_mm;
+        fitted + w * samples(u, v)
     }
 }
 
@@ -673,6 +707,59 @@ mod tests {
         let (cx, cy) = t.centroid_mm();
         assert!(cx.abs() < 0.05 && cy.abs() < 0.05, "{cx} {cy}");
         assert!((t.value_at_mm(2.0, 0.0) - g.rate_at_mm(2.0, 0.0)).abs() < 0.1);
+    }
+
+    /// The line evaluation of a measured spot (and of its derived channels) gives the point
+    /// values, on lines through the footprint, its taper and its cut, in both directions.
+    #[test]
+    fn rates_along_a_line_are_the_point_values() {
+        use crate::tif::derived::{Channel, Derived};
+        let g = GaussianTif::new(1.2, 8.0, 5.0).unwrap();
+        let mut rng = Rng::new(4);
+        let (xc, yc) = (6.1, 5.3);
+        let h = Array2::from_shape_fn((60, 64), |(i, j)| {
+            let (x, y) = (j as f64 * 0.2, i as f64 * 0.2);
+            -g.rate_at_mm(x - xc, y - yc) * 10.0 + 0.05 * rng.normal()
+        });
+        let s = Surface::new(h, Some(0.2), Some(0.2)).unwrap();
+        let m = MeasuredTif::from_spot(&s, 10.0, &SpotOptions::default()).unwrap();
+        let (ex, _) = m.half_extent_mm();
+        let t: Vec<f64> = (0..997)
+            .map(|k| -1.1 * ex + 2.2 * ex * k as f64 / 996.0)
+            .collect();
+        let base: std::sync::Arc<dyn RateField + Send> = std::sync::Arc::new(m.clone());
+        let fields: Vec<Box<dyn RateField>> = vec![
+            Box::new(m),
+            Box::new(Derived::new(base.clone(), 1.1, Channel::Value, 0.0)),
+            Box::new(Derived::new(base.clone(), 0.9, Channel::Dx, 0.02)),
+            Box::new(Derived::new(base.clone(), 1.0, Channel::Dy, 0.02)),
+            Box::new(Derived::new(base, 1.2, Channel::Ds, 1e-3)),
+        ];
+        let mut out = vec![0.0; t.len()];
+        for f in &fields {
+            let peak = f
+                .rate_at_mm(0.0, 0.0)
+                .abs()
+                .max(f.rate_at_mm(0.5, 0.5).abs());
+            for c in [-1.05 * ex, -3.3, -0.07, 0.0, 1.9, 0.8 * ex] {
+                for along_x in [true, false] {
+                    f.rates_along(along_x, c, &t, &mut out);
+                    let mut nonzero = 0;
+                    for (&p, &o) in t.iter().zip(&out) {
+                        let want = if along_x {
+                            f.rate_at_mm(p, c)
+                        } else {
+                            f.rate_at_mm(c, p)
+                        };
+                        assert!((o - want).abs() <= 1e-12 * peak, "{c} {p}: {o} vs {want}");
+                        nonzero += usize::from(want != 0.0);
+                    }
+                    if c.abs() < 2.0 {
+                        assert!(nonzero > 100);
+                    }
+                }
+            }
+        }
     }
 
     #[test]

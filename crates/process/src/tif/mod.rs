@@ -34,6 +34,19 @@ pub trait RateField: Sync {
     fn volume_rate_nm_mm2_per_s(&self) -> Option<f64> {
         None
     }
+    /// Rates along one line: `out[k]` is the rate at `(t[k], c)` when `along_x`, else at
+    /// `(c, t[k])` (mm). The same values as [`RateField::rate_at_mm`]; the kernel builds ask for
+    /// thousands of points of one row or column at a time, and a field can share work between
+    /// them (a measured spot interpolates across the line once).
+    fn rates_along(&self, along_x: bool, c: f64, t: &[f64], out: &mut [f64]) {
+        for (o, &v) in out.iter_mut().zip(t) {
+            *o = if along_x {
+                self.rate_at_mm(v, c)
+            } else {
+                self.rate_at_mm(c, v)
+            };
+        }
+    }
 }
 
 /// A sampled removal-rate map (nm/s), tool centre at the middle pixel.

@@ -43,12 +43,29 @@ pub fn kernels_from_field(
     dx_mm: f64,
     dy_mm: f64,
 ) -> Result<[Tif; 3], ProcessError> {
-    let point = Tif::sample(field, dx_mm, dy_mm)?;
-    let (h0, h1) = point.half_widths();
-    // One more pixel along the axis: the box reaches half a pixel beyond the footprint.
-    let ax = box_kernel(field, dx_mm, dy_mm, true, (h0, h1 + 1), 0.0)?;
-    let ay = box_kernel(field, dx_mm, dy_mm, false, (h0 + 1, h1), 0.0)?;
-    Ok([point, ax, ay])
+    let half = Tif::sample_half_widths(field, dx_mm, dy_mm)?;
+    Ok([
+        kernel_from_field(field, dx_mm, dy_mm, 0, half)?,
+        kernel_from_field(field, dx_mm, dy_mm, 1, half)?,
+        kernel_from_field(field, dx_mm, dy_mm, 2, half)?,
+    ])
+}
+
+/// One of [`kernels_from_field`]'s kernels: `m` 0 point samples, 1 along X, 2 along Y, given the
+/// half-widths `(h0, h1)` of the point-sampled kernel ([`Tif::sample_half_widths`]).
+pub fn kernel_from_field(
+    field: &dyn RateField,
+    dx_mm: f64,
+    dy_mm: f64,
+    m: usize,
+    (h0, h1): (usize, usize),
+) -> Result<Tif, ProcessError> {
+    match m {
+        0 => Tif::sample(field, dx_mm, dy_mm),
+        // One more pixel along the axis: the box reaches half a pixel beyond the footprint.
+        1 => box_kernel(field, dx_mm, dy_mm, true, (h0, h1 + 1), 0.0),
+        _ => box_kernel(field, dx_mm, dy_mm, false, (h0 + 1, h1), 0.0),
+    }
 }
 
 /// The along-X kernel for a tool centre `phase` rows (0 <= phase <= 1) below the pixel row its
@@ -114,23 +131,37 @@ fn box_kernel(
     (g0, g1): (usize, usize),
     phase: f64,
 ) -> Result<Tif, ProcessError> {
-    let rate = Array2::from_shape_fn((2 * g0 + 1, 2 * g1 + 1), |(i, j)| {
-        let (px, py) = if along_x { (0.0, phase) } else { (phase, 0.0) };
-        let (cx, cy) = (
-            (j as f64 - g1 as f64 - px) * dx_mm,
-            (i as f64 - g0 as f64 - py) * dy_mm,
-        );
-        let mut s = 0.0;
-        for k in 0..SUB {
-            let f = (k as f64 + 0.5) / SUB as f64 - 0.5;
-            s += if along_x {
-                field.rate_at_mm(cx + f * dx_mm, cy)
-            } else {
-                field.rate_at_mm(cx, cy + f * dy_mm)
-            };
+    let (rows, cols) = (2 * g0 + 1, 2 * g1 + 1);
+    let (px, py) = if along_x { (0.0, phase) } else { (phase, 0.0) };
+    let x_of = |j: usize| (j as f64 - g1 as f64 - px) * dx_mm;
+    let y_of = |i: usize| (i as f64 - g0 as f64 - py) * dy_mm;
+    // One line of the kernel (a row moving along X, a column along Y) at a time: its SUB
+    // midpoints per pixel in one call of the field.
+    let (lines, len, h) = if along_x {
+        (rows, cols, dx_mm)
+    } else {
+        (cols, rows, dy_mm)
+    };
+    let mut t = Vec::with_capacity(len * SUB);
+    let mut v = vec![0.0; len * SUB];
+    let mut rate = Array2::zeros((rows, cols));
+    for l in 0..lines {
+        t.clear();
+        for p in 0..len {
+            let centre = if along_x { x_of(p) } else { y_of(p) };
+            t.extend((0..SUB).map(|k| centre + ((k as f64 + 0.5) / SUB as f64 - 0.5) * h));
         }
-        s / SUB as f64
-    });
+        let c = if along_x { y_of(l) } else { x_of(l) };
+        field.rates_along(along_x, c, &t, &mut v);
+        for (p, chunk) in v.chunks_exact(SUB).enumerate() {
+            let mean = chunk.iter().sum::<f64>() / SUB as f64;
+            if along_x {
+                rate[(l, p)] = mean;
+            } else {
+                rate[(p, l)] = mean;
+            }
+        }
+    }
     Tif::new(rate, dx_mm, dy_mm)
 }
 
