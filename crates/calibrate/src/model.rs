@@ -774,3 +774,40 @@ impl Eval {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn of(v: &[f64]) -> u128 {
+        let mut h = Fingerprint::new();
+        h.slice(v);
+        h.finish()
+    }
+
+    #[test]
+    fn fingerprints_tell_reordered_and_shifted_slices_apart() {
+        let v: Vec<f64> = (0..37).map(|k| (k as f64 * 0.37).sin()).collect();
+        assert_eq!(of(&v), of(&v.clone()));
+        let mut seen = std::collections::HashSet::new();
+        seen.insert(of(&v));
+        // Two words swapped within a lane group and across lanes, one word changed, one
+        // dropped, one lane's words moved to the next lane, and the slice split in two.
+        for (a, b) in [(0, 1), (0, 4), (35, 36)] {
+            let mut w = v.clone();
+            w.swap(a, b);
+            assert!(seen.insert(of(&w)), "swap {a} {b}");
+        }
+        let mut w = v.clone();
+        w[17] = f64::from_bits(w[17].to_bits() ^ 1);
+        assert!(seen.insert(of(&w)));
+        assert!(seen.insert(of(&v[..36])));
+        assert!(seen.insert(of(&v[1..])));
+        let mut h = Fingerprint::new();
+        h.slice(&v[..20]);
+        h.slice(&v[20..]);
+        assert!(seen.insert(h.finish()));
+        let z = vec![0.0; 8];
+        assert_ne!(of(&z), of(&z[..4]));
+    }
+}

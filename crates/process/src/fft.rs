@@ -590,6 +590,22 @@ impl MultiConvolver {
     /// cost nothing. Inputs beyond the number of kernels are ignored. Rows of an input that are
     /// all zero (a raster's line map has one row in `pitch / pixel`) skip their row transform.
     pub fn apply_sum(&mut self, inputs: &[Option<ArrayView2<f64>>]) -> Array2<f64> {
+        self.apply_sum_window(inputs, (0, 0), (self.rows, self.cols))
+    }
+
+    /// [`MultiConvolver::apply_sum`] on the window of `shape` at `origin` of the input shape
+    /// only (no full-size output is formed: the removal keeps the map inside its grown grid).
+    pub fn apply_sum_window(
+        &mut self,
+        inputs: &[Option<ArrayView2<f64>>],
+        origin: (usize, usize),
+        shape: (usize, usize),
+    ) -> Array2<f64> {
+        let (r0, c0) = origin;
+        assert!(
+            r0 + shape.0 <= self.rows && c0 + shape.1 <= self.cols,
+            "output window outside the convolution"
+        );
         let n1 = self.fft.shape().1;
         let parallel = self.fft.is_parallel();
         let mut any = false;
@@ -637,14 +653,15 @@ impl MultiConvolver {
             }
             any = true;
         }
-        let mut out = Array2::zeros((self.rows, self.cols));
+        let mut out = Array2::zeros(shape);
         if !any {
             return out;
         }
         self.fft
-            .inverse_rows(&mut self.acc, &mut self.tmp, &mut self.real, self.rows);
-        for i in 0..self.rows {
-            for (d, s) in out.row_mut(i).iter_mut().zip(self.real[i * n1..].iter()) {
+            .inverse_rows(&mut self.acc, &mut self.tmp, &mut self.real, r0 + shape.0);
+        for (i, mut row) in out.rows_mut().into_iter().enumerate() {
+            let start = (r0 + i) * n1 + c0;
+            for (d, s) in row.iter_mut().zip(&self.real[start..start + shape.1]) {
                 *d = *s;
             }
         }
@@ -792,6 +809,12 @@ mod tests {
         let before = m.fft().transforms();
         let _ = m.apply_sum(&[None, Some(y.view())]);
         assert_eq!(m.fft().transforms() - before, 2);
+        // A window of the output is that window of the whole.
+        let win = m.apply_sum_window(&[Some(x.view()), Some(y.view())], (3, 5), (r - 7, c - 9));
+        let d = (&win - &want.slice(ndarray::s![3..r - 4, 5..c - 4]))
+            .iter()
+            .fold(0.0f64, |a, v| a.max(v.abs()));
+        assert!(d < 1e-10, "{d}");
     }
 
     #[test]

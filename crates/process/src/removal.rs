@@ -15,7 +15,7 @@
 //! the path log with straight lines between samples. Optional per-sample `weights` multiply the
 //! removal rate (linear between samples): rate drifts, vibration modulation.
 
-use ndarray::{s, Array2, ArrayView2};
+use ndarray::{Array2, ArrayView2};
 
 use crate::error::ProcessError;
 use crate::fft::{fast_len, Complex, Convolver, MultiConvolver};
@@ -593,14 +593,13 @@ impl FastRemoval {
         let idx = self.base_kernel(0)?;
         let mut views = vec![None; self.conv.kernel_count()];
         views[idx] = Some(dwell_ext_s.view());
-        let full = self.conv.apply_sum(&views);
-        Ok(self.crop(&full))
+        Ok(self.on_grid(&views))
     }
 
-    fn crop(&self, full: &Array2<f64>) -> Array2<f64> {
-        let (h0, h1) = self.h;
-        full.slice(s![h0..h0 + self.grid.rows, h1..h1 + self.grid.cols])
-            .to_owned()
+    /// The sum of the convolutions of `views` on the map grid (inside the grown grid).
+    fn on_grid(&mut self, views: &[Option<ArrayView2<f64>>]) -> Array2<f64> {
+        let shape = (self.grid.rows, self.grid.cols);
+        self.conv.apply_sum_window(views, self.h, shape)
     }
 
     /// Convolver index of the centred kernel of motion `m` (0 resting, 1 along X, 2 along Y),
@@ -863,7 +862,7 @@ impl FastRemoval {
                 views[idx[t]] = Some(a.view());
             }
         }
-        let full = self.conv.apply_sum(&views);
+        let out = self.on_grid(&views);
         // Back to the pool, zeroed.
         for mut m in maps.into_iter().flatten() {
             if self.pool.len() < MAX_POOLED_MAPS {
@@ -871,7 +870,7 @@ impl FastRemoval {
                 self.pool.push(m);
             }
         }
-        Ok(self.crop(&full))
+        Ok(out)
     }
 }
 
