@@ -21,7 +21,9 @@ use crate::error::ProcessError;
 use crate::fft::{fast_len, Complex, Convolver, MultiConvolver};
 use crate::grid::Grid;
 use crate::path::PathLog;
-use crate::tif::motion::{along_x_at_phase_sized, along_y_at_phase_sized, kernel_from_field};
+use crate::tif::motion::{
+    along_x_at_phase_sized, along_y_at_phase_sized, kernel_from_field, point_at_phase_sized,
+};
 use crate::tif::{RateField, Tif};
 
 fn check_weights(path: &PathLog, weights: Option<&[f64]>) -> Result<(), ProcessError> {
@@ -318,10 +320,6 @@ enum Lines {
     /// kernels at the fixed phases `j / PHASE_NODES`.
     #[default]
     Spread,
-    /// A minor motion (a raster's step-overs: less than [`MINOR_MOTION_SHARE`] of the path's
-    /// dwell): splatted cubically onto the motion's centred kernel, together with the major
-    /// motion's stray dwell (see [`FastRemoval`]'s `removal_of_steps`).
-    Minor,
 }
 
 /// Line phases of a path's along-X dwell: the kernel-phase of each histogram bin's run.
@@ -330,6 +328,8 @@ struct LinePhases {
     bin_cluster: Vec<u8>,
     /// Dwell-weighted mean phase of each cluster.
     phase: Vec<f64>,
+    /// A minor motion (see [`MINOR_MOTION_SHARE`]).
+    minor: bool,
 }
 
 /// The line phases of the along-X (`kind` 1: sub-row) or along-Y (`kind` 2: sub-column) dwell
@@ -356,9 +356,7 @@ fn line_phases(steps: &[SubStep], kind: usize) -> Lines {
     // the rows) and go to the centred kernel, unless they hold more than STRAY_SHARE of the
     // path's dwell.
     let total: f64 = w_sum.iter().sum();
-    if total > 0.0 && total < MINOR_MOTION_SHARE * all {
-        return Lines::Minor;
-    }
+    let minor = total < MINOR_MOTION_SHARE * all;
     let floor = LINE_BIN_SHARE * total;
     let hit: Vec<bool> = w_sum.iter().map(|&a| a > 0.0 && a >= floor).collect();
     let stray: f64 = w_sum
@@ -387,9 +385,20 @@ fn line_phases(steps: &[SubStep], kind: usize) -> Lines {
         }
         let (w, wp) = (start..b).fold((0.0, 0.0), |(x, y), k| (x + w_sum[k], y + wp_sum[k]));
         bin_cluster[start..b].fill(phase.len() as u8);
-        phase.push(wp / w);
+        let f = wp / w;
+        // A minor motion's lines (a raster's step-overs) take their kernel at the nearest
+        // 1 / MINOR_PHASE_STEPS pixel, so a path moved by a little reuses its kernels.
+        phase.push(if minor {
+            (f * MINOR_PHASE_STEPS).round() / MINOR_PHASE_STEPS
+        } else {
+            f
+        });
     }
-    Lines::Phases(LinePhases { bin_cluster, phase })
+    Lines::Phases(LinePhases {
+        bin_cluster,
+        phase,
+        minor,
+    })
 }
 
 /// Share of a sub-step's dwell in one motion below which it is a side-effect of motion along
@@ -398,19 +407,20 @@ fn line_phases(steps: &[SubStep], kind: usize) -> Lines {
 /// its own). The two one-pixel box kernels differ by about 1 % of the footprint, so the error
 /// is below 1e-4 of the sub-step's removal.
 const MINOR_SHARE: f64 = 1e-2;
-/// Share of the path's dwell below which a motion is minor (a raster's step-overs, about 1 %,
-/// mostly beyond the part): it has no line kernels of its own but is splatted cubically onto
-/// its centred kernel, which also takes the major motion's stray dwell, so a raster's removal
-/// is two forward transforms (its lines' kernel and this one) instead of one per step-over
-/// phase and stray kind (five on the calibration's synthetic runs). The cubic splat across a
-/// steep footprint edge misses the line profile by up to 2 % of its peak, and the stray dwell's
-/// kernel is off by about 1 % (the two box kernels differ by that), both on at most 6 % of the
-/// dwell. Measured against the phase kernels for every step-over (2026-11-25): the truth
-/// suite's worst errors against exact deposition unchanged in every printed digit (removal RMS
-/// 0.021 %, sigma_1 0.08 %); the demo's predicted MSF band RMS 3.07576 -> 3.07476 nm, its
-/// `dwell_execution` mechanism 5.43e-3 -> 5.39e-3 nm; the synthetic suite's calibration the
-/// same effects and parameters to 3-4 digits, at 0.73 of the CPU time.
+/// Share of the path's dwell below which a motion is minor (a raster's step-overs, 1-3 %).
+/// Its lines keep kernels at their own phase across them (rounded to 1 / [`MINOR_PHASE_STEPS`]
+/// pixel, so a path moved by a little reuses them), but point-sampled: one field value per
+/// kernel pixel instead of the 32 of a one-pixel average along the motion, which changes their
+/// small removal by about 1 %. The major motion's stray dwell (off its lines) then goes onto the
+/// point-sampled kernel too, so the along-X and along-Y centred kernels are not built. Measured
+/// (2026-11-25) on the demo's run, whose raster turns on the part's edge: MSF band RMS of the
+/// fast baseline removal minus direct deposition 0.0117 nm of 3.076 nm (with box-averaged
+/// step-over kernels 0.0099 nm; splatted cubically across their columns 0.036-0.040 nm, which
+/// is why they keep their phases: test
+/// `raster_turning_on_the_part_edge_matches_direct_deposition_in_the_msf_band`); the truth
+/// suite's worst errors unchanged in every printed digit.
 const MINOR_MOTION_SHARE: f64 = 5e-2;
+const MINOR_PHASE_STEPS: f64 = 64.0;
 /// Least share of a motion's dwell in one sub-row phase bin for the bin to belong to a line.
 const LINE_BIN_SHARE: f64 = 1e-2;
 /// Most share of the path's dwell in phase bins outside the lines (splatted cubically onto the
@@ -446,7 +456,7 @@ struct SubStep {
 /// A cached line-phase kernel.
 #[derive(Debug, Clone, Copy)]
 struct PhaseKernel {
-    /// Motion kind: 1 along X, 2 along Y.
+    /// Motion kind: 1 along X, 2 along Y (box kernels); 3, 4 the same, point-sampled.
     kind: usize,
     /// Phase in 1 / 2^20 pixel.
     q: u32,
@@ -621,7 +631,7 @@ impl FastRemoval {
     /// least recently used one not used in this call.
     fn phase_kernel(&mut self, kind: usize, q: u32) -> Result<usize, ProcessError> {
         if q == 0 {
-            return self.base_kernel(kind);
+            return self.base_kernel(if kind > 2 { 0 } else { kind });
         }
         let now = self.calls;
         if let Some(e) = self.phases.iter_mut().find(|e| e.kind == kind && e.q == q) {
@@ -630,10 +640,10 @@ impl FastRemoval {
         }
         let (f, dx, dy) = (self.field.as_ref(), self.grid.dx_mm, self.grid.dy_mm);
         let ph = q as f64 / PHASE_KEY_STEPS;
-        let t = if kind == 1 {
-            along_x_at_phase_sized(f, dx, dy, ph, self.half)?
-        } else {
-            along_y_at_phase_sized(f, dx, dy, ph, self.half)?
+        let t = match kind {
+            1 => along_x_at_phase_sized(f, dx, dy, ph, self.half)?,
+            2 => along_y_at_phase_sized(f, dx, dy, ph, self.half)?,
+            _ => point_at_phase_sized(f, dx, dy, ph, kind == 3, self.half)?,
         };
         self.phase_builds += 1;
         let stale = self
@@ -670,12 +680,15 @@ impl FastRemoval {
 
     /// Kernel indices for the phases of each motion kind (no index handed out here is
     /// replaced within the same call).
-    fn phase_kernels(&mut self, wanted: [&[f64]; 2]) -> Result<[Vec<usize>; 2], ProcessError> {
+    fn phase_kernels(
+        &mut self,
+        wanted: [(usize, &[f64]); 2],
+    ) -> Result<[Vec<usize>; 2], ProcessError> {
         self.calls += 1;
         let key = |f: f64| (f * PHASE_KEY_STEPS).round() as u32;
         // Mark the kernels this call uses first, so building a missing one never replaces them.
         let now = self.calls;
-        for (kind, phases) in [(1, wanted[0]), (2, wanted[1])] {
+        for (kind, phases) in wanted {
             for &f in phases {
                 let q = key(f);
                 if let Some(e) = self.phases.iter_mut().find(|e| e.kind == kind && e.q == q) {
@@ -689,8 +702,8 @@ impl FastRemoval {
                 .map(|&f| self.phase_kernel(kind, key(f)))
                 .collect()
         };
-        let x = get(1, wanted[0])?;
-        let y = get(2, wanted[1])?;
+        let x = get(wanted[0].0, wanted[0].1)?;
+        let y = get(wanted[1].0, wanted[1].1)?;
         Ok([x, y])
     }
 
@@ -774,21 +787,28 @@ impl FastRemoval {
             match l {
                 Lines::Phases(lp) => lp.phase.clone(),
                 Lines::Spread => nodes.clone(),
-                Lines::Minor => Vec::new(),
             }
         };
-        let [sx, sy] = self.phase_kernels([&wanted(&lines[0]), &wanted(&lines[1])])?;
+        // A minor motion's lines take point-sampled kernels (kinds 3 and 4).
+        let kind_of = |k: usize| match &lines[k - 1] {
+            Lines::Phases(lp) if lp.minor => k + 2,
+            _ => k,
+        };
+        let [sx, sy] = self.phase_kernels([
+            (kind_of(1), &wanted(&lines[0])),
+            (kind_of(2), &wanted(&lines[1])),
+        ])?;
         // Where each motion's stray dwell (off its lines, or a minor share of a sub-step) goes:
-        // the centred kernel of the other motion when that one is minor (one transform for the
-        // step-overs and the strays), else its own.
+        // with one motion minor, onto the point-sampled kernel (see MINOR_MOTION_SHARE), else
+        // onto its own motion's centred kernel.
         let minor = [
-            matches!(lines[0], Lines::Minor),
-            matches!(lines[1], Lines::Minor),
+            matches!(&lines[0], Lines::Phases(lp) if lp.minor),
+            matches!(&lines[1], Lines::Phases(lp) if lp.minor),
         ];
+        let one_minor = minor[0] != minor[1];
         let sink = |kind: usize| -> usize {
-            let other = 3 - kind;
-            if minor[other - 1] && !minor[kind - 1] {
-                other
+            if one_minor {
+                0
             } else {
                 kind
             }
@@ -824,7 +844,6 @@ impl FastRemoval {
                     }
                 };
                 match &lines[kind - 1] {
-                    Lines::Minor => splat_cubic(get!(kind), u, v, w * share),
                     _ if share < MINOR_SHARE => splat_cubic(get!(sink(kind)), u, v, w * share),
                     Lines::Phases(lp) => match lp.bin_cluster[b] {
                         u8::MAX => splat_cubic(get!(sink(kind)), u, v, w * share),

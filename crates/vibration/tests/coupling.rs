@@ -260,7 +260,12 @@ fn each_vibration_mechanism_matches_direct_deposition_when_exaggerated() {
     };
     let base = direct_removal(&input, Bonnet::Original, &none).unwrap();
     let mut results = Vec::new();
-    for name in ["normal_offset", "lateral_jitter", "envelope"] {
+    for name in [
+        "normal_offset",
+        "lateral_jitter",
+        "envelope",
+        "dwell_execution",
+    ] {
         let opts = CouplingOptions {
             mechanisms: Mechanisms::only(name),
             ..none
@@ -377,4 +382,52 @@ fn spindle_sweep_shows_the_resonance() {
     };
     assert!(get(558.0, Bonnet::Original) > get(1500.0, Bonnet::Original));
     assert!(get(558.0, Bonnet::Suppression) < get(558.0, Bonnet::Original));
+}
+
+/// The demo's run (the paper's bonnet, 100 mm part at 0.4 mm, 3 mm raster at 1.6 mm/s with no
+/// overtravel): the raster turns on the part's edge, so its step-overs (3 % of the dwell) sit on
+/// the map. The fast baseline removal against direct deposition in the MSF band. Measured
+/// (2026-11-25): difference 0.0099 nm of 3.0760 nm (0.32 %) with box-averaged phase kernels for
+/// the step-overs, 0.0117 nm (0.38 %) with point-sampled ones, 0.036-0.040 nm (1.2-1.3 %) with
+/// the step-overs splatted cubically across their columns.
+#[test]
+fn raster_turning_on_the_part_edge_matches_direct_deposition_in_the_msf_band() {
+    use bonnetlab_process::tif::BonnetTifParams;
+    use bonnetlab_vibration::coupling::CouplingCase;
+    let tp = BonnetTifParams::paper(10.0);
+    let params = VibrationParams::from_parts(
+        None,
+        Some(tp.spindle_rpm),
+        Some(tp.offset_mm),
+        Some(0.25),
+        None,
+    )
+    .unwrap();
+    let case = CouplingCase::square_raster(
+        &TifSource::Bonnet(tp),
+        params,
+        250,
+        0.4,
+        0.2,
+        100.0,
+        3.0,
+        1.6,
+        0.0,
+    )
+    .unwrap();
+    let input = case.input();
+    let band = CouplingOptions::default().msf_band_per_mm;
+    let opts = CouplingOptions {
+        mechanisms: Mechanisms::NONE,
+        sample_hz: 100.0,
+        ..Default::default()
+    };
+    let fast = fast_maps(&input, Bonnet::Original, &opts).unwrap();
+    let direct = direct_removal(&input, Bonnet::Original, &opts).unwrap();
+    let rf = msf_band_rms_y(&input, &fast.baseline, band).unwrap();
+    let rd = msf_band_rms_y(&input, &direct, band).unwrap();
+    let dd = band_diff(&input, &fast.baseline, &direct);
+    eprintln!("MSF band RMS fast {rf:.6} nm, direct {rd:.6} nm, difference {dd:.6} nm");
+    assert!(rd > 1.0);
+    assert!(dd < 5e-3 * rd, "{dd} vs {rd}");
 }

@@ -121,6 +121,34 @@ pub fn along_y_at_phase_sized(
     box_kernel(field, dx_mm, dy_mm, false, (h0 + 1, h1 + 2), phase)
 }
 
+/// The point-sampled kernel for a tool centre `phase` pixels (0 <= phase <= 1) off the pixel
+/// lane its dwell is put on, across the motion: below the row for motion along X (`along_x`),
+/// right of the column for motion along Y; sized as [`along_x_at_phase_sized`] and
+/// [`along_y_at_phase_sized`]. For a minor motion (a raster's step-overs), whose lines need the
+/// exact phase across them but whose one-pixel average along them changes its small removal
+/// by about 1 %: one field value per kernel pixel instead of 32.
+pub fn point_at_phase_sized(
+    field: &dyn RateField,
+    dx_mm: f64,
+    dy_mm: f64,
+    phase: f64,
+    along_x: bool,
+    (h0, h1): (usize, usize),
+) -> Result<Tif, ProcessError> {
+    let ((g0, g1), (px, py)) = if along_x {
+        ((h0 + 2, h1 + 1), (0.0, phase))
+    } else {
+        ((h0 + 1, h1 + 2), (phase, 0.0))
+    };
+    let rate = Array2::from_shape_fn((2 * g0 + 1, 2 * g1 + 1), |(i, j)| {
+        field.rate_at_mm(
+            (j as f64 - g1 as f64 - px) * dx_mm,
+            (i as f64 - g0 as f64 - py) * dy_mm,
+        )
+    });
+    Tif::new(rate, dx_mm, dy_mm)
+}
+
 /// A (2 g0 + 1) x (2 g1 + 1) kernel: the field averaged over one pixel along X (`along_x`) or
 /// Y, shifted across that axis by `phase` pixels (rows for along X, columns for along Y).
 fn box_kernel(
