@@ -72,6 +72,8 @@ fn once(n: usize) {
 criterion_group!(benches, bench);
 
 fn main() {
+    // As the command line does (see bonnetlab_process::memory).
+    bonnetlab_process::memory::retain_freed_memory();
     if let Some(n) = std::env::var("BONNETLAB_CALIBRATE_ONCE")
         .ok()
         .and_then(|v| v.parse::<usize>().ok())

@@ -515,6 +515,8 @@ fn pct(a: usize, b: usize) -> String {
 }
 
 fn main() {
+    // As the command line does (see bonnetlab_process::memory).
+    bonnetlab_process::memory::retain_freed_memory();
     let args = match parse_args() {
         Ok(a) => a,
         Err(e) => {

@@ -4,6 +4,8 @@
 use clap::Parser;
 
 fn main() {
+    // Map-sized arrays are freed and allocated again thousands of times per calibration.
+    bonnetlab_process::memory::retain_freed_memory();
     let cli = match bonnetlab::cli::Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => std::process::exit(bonnetlab::cli::usage_error(&e)),

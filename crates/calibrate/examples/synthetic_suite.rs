@@ -44,6 +44,8 @@ fn cpu_s() -> Option<f64> {
 }
 
 fn main() {
+    // As the command line does (see bonnetlab_process::memory).
+    bonnetlab_process::memory::retain_freed_memory();
     let none = |_: &mut SynthConfig| {};
     let cases = vec![
         case("null", 21, vec![], none),

@@ -12,6 +12,7 @@ pub mod error;
 pub mod fft;
 pub mod grid;
 pub mod interp;
+pub mod memory;
 pub mod modulated;
 pub mod path;
 pub mod perturb;
