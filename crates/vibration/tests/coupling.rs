@@ -260,12 +260,7 @@ fn each_vibration_mechanism_matches_direct_deposition_when_exaggerated() {
     };
     let base = direct_removal(&input, Bonnet::Original, &none).unwrap();
     let mut results = Vec::new();
-    for name in [
-        "normal_offset",
-        "lateral_jitter",
-        "envelope",
-        "dwell_execution",
-    ] {
+    for name in ["normal_offset", "lateral_jitter", "envelope"] {
         let opts = CouplingOptions {
             mechanisms: Mechanisms::only(name),
             ..none
