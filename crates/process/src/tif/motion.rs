@@ -93,8 +93,25 @@ pub fn along_x_at_phase_sized(
     phase: f64,
     (h0, h1): (usize, usize),
 ) -> Result<Tif, ProcessError> {
-    // Two rows more: the footprint shifted by up to a row still fits.
-    box_kernel(field, dx_mm, dy_mm, true, (h0 + 2, h1 + 1), phase)
+    box_kernel(
+        field,
+        dx_mm,
+        dy_mm,
+        true,
+        phase_half_widths(true, (h0, h1)),
+        phase,
+    )
+}
+
+/// Half-widths of a line-phase kernel for motion along X (`along_x`) or Y, from those of the
+/// point-sampled kernel: two more across the motion (the footprint shifted by up to a pixel
+/// still fits) and one more along it (a box average reaches half a pixel beyond).
+fn phase_half_widths(along_x: bool, (h0, h1): (usize, usize)) -> (usize, usize) {
+    if along_x {
+        (h0 + 2, h1 + 1)
+    } else {
+        (h0 + 1, h1 + 2)
+    }
 }
 
 /// The along-Y kernel for a tool centre `phase` columns (0 <= phase <= 1) right of the pixel
@@ -118,7 +135,14 @@ pub fn along_y_at_phase_sized(
     phase: f64,
     (h0, h1): (usize, usize),
 ) -> Result<Tif, ProcessError> {
-    box_kernel(field, dx_mm, dy_mm, false, (h0 + 1, h1 + 2), phase)
+    box_kernel(
+        field,
+        dx_mm,
+        dy_mm,
+        false,
+        phase_half_widths(false, (h0, h1)),
+        phase,
+    )
 }
 
 /// The point-sampled kernel for a tool centre `phase` pixels (0 <= phase <= 1) off the pixel
@@ -133,13 +157,10 @@ pub fn point_at_phase_sized(
     dy_mm: f64,
     phase: f64,
     along_x: bool,
-    (h0, h1): (usize, usize),
+    half: (usize, usize),
 ) -> Result<Tif, ProcessError> {
-    let ((g0, g1), (px, py)) = if along_x {
-        ((h0 + 2, h1 + 1), (0.0, phase))
-    } else {
-        ((h0 + 1, h1 + 2), (phase, 0.0))
-    };
+    let (g0, g1) = phase_half_widths(along_x, half);
+    let (px, py) = if along_x { (0.0, phase) } else { (phase, 0.0) };
     let rate = Array2::from_shape_fn((2 * g0 + 1, 2 * g1 + 1), |(i, j)| {
         field.rate_at_mm(
             (j as f64 - g1 as f64 - px) * dx_mm,
