@@ -22,7 +22,7 @@ use crate::fft::{fast_len, Complex, Convolver, MultiConvolver};
 use crate::grid::Grid;
 use crate::path::PathLog;
 use crate::tif::motion::{
-    along_x_at_phase_sized, along_y_at_phase_sized, kernel_from_field, point_at_phase_sized,
+    along_x_at_phase_sized, along_y_at_phase_sized, kernel_from_field, point_at_phase_sized, Motion,
 };
 use crate::tif::{RateField, Tif};
 
@@ -619,7 +619,8 @@ impl FastRemoval {
             return Ok(idx);
         }
         let (f, dx, dy) = (self.field.as_ref(), self.grid.dx_mm, self.grid.dy_mm);
-        let t = kernel_from_field(f, dx, dy, m, self.half)?;
+        let motion = [Motion::Resting, Motion::AlongX, Motion::AlongY][m];
+        let t = kernel_from_field(f, dx, dy, motion, self.half)?;
         let idx = self.conv.push_kernel(t.rate_nm_per_s.view());
         self.base[m] = Some(idx);
         Ok(idx)

@@ -45,26 +45,26 @@ pub fn kernels_from_field(
 ) -> Result<[Tif; 3], ProcessError> {
     let half = Tif::sample_half_widths(field, dx_mm, dy_mm)?;
     Ok([
-        kernel_from_field(field, dx_mm, dy_mm, 0, half)?,
-        kernel_from_field(field, dx_mm, dy_mm, 1, half)?,
-        kernel_from_field(field, dx_mm, dy_mm, 2, half)?,
+        kernel_from_field(field, dx_mm, dy_mm, Motion::Resting, half)?,
+        kernel_from_field(field, dx_mm, dy_mm, Motion::AlongX, half)?,
+        kernel_from_field(field, dx_mm, dy_mm, Motion::AlongY, half)?,
     ])
 }
 
-/// One of [`kernels_from_field`]'s kernels: `m` 0 point samples, 1 along X, 2 along Y, given the
-/// half-widths `(h0, h1)` of the point-sampled kernel ([`Tif::sample_half_widths`]).
+/// The kernel of one [`Motion`] ([`kernels_from_field`]'s three), given the half-widths
+/// `(h0, h1)` of the point-sampled kernel ([`Tif::sample_half_widths`]).
 pub fn kernel_from_field(
     field: &dyn RateField,
     dx_mm: f64,
     dy_mm: f64,
-    m: usize,
+    motion: Motion,
     (h0, h1): (usize, usize),
 ) -> Result<Tif, ProcessError> {
-    match m {
-        0 => Tif::sample(field, dx_mm, dy_mm),
+    match motion {
+        Motion::Resting => Tif::sample(field, dx_mm, dy_mm),
         // One more pixel along the axis: the box reaches half a pixel beyond the footprint.
-        1 => box_kernel(field, dx_mm, dy_mm, true, (h0, h1 + 1), 0.0),
-        _ => box_kernel(field, dx_mm, dy_mm, false, (h0 + 1, h1), 0.0),
+        Motion::AlongX => box_kernel(field, dx_mm, dy_mm, true, (h0, h1 + 1), 0.0),
+        Motion::AlongY => box_kernel(field, dx_mm, dy_mm, false, (h0 + 1, h1), 0.0),
     }
 }
 
