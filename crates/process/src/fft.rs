@@ -8,6 +8,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
+use crate::memory::zeroed_vec;
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
@@ -485,7 +486,21 @@ impl Convolver {
 /// (wrapped), for a transform of `fft`'s size.
 fn kernel_hat(fft: &Fft2, kernel: ArrayView2<f64>) -> Vec<Complex<f64>> {
     let (n0, n1) = fft.shape();
-    let mut real = vec![0.0; n0 * n1];
+    let mut real = zeroed_vec(n0 * n1, 0.0);
+    let mut tmp = zeroed_vec(fft.spectrum_len(), Complex::new(0.0, 0.0));
+    kernel_hat_with(fft, kernel, &mut real, &mut tmp)
+}
+
+/// [`kernel_hat`] through the caller's scratch (`real`: n0 x n1, `tmp`: a spectrum; both
+/// overwritten).
+fn kernel_hat_with(
+    fft: &Fft2,
+    kernel: ArrayView2<f64>,
+    real: &mut [f64],
+    tmp: &mut [Complex<f64>],
+) -> Vec<Complex<f64>> {
+    let (n0, n1) = fft.shape();
+    real.fill(0.0);
     let (k0, k1) = kernel.dim();
     let (c0, c1) = (k0 / 2, k1 / 2);
     for ((a, b), &v) in kernel.indexed_iter() {
@@ -493,9 +508,8 @@ fn kernel_hat(fft: &Fft2, kernel: ArrayView2<f64>) -> Vec<Complex<f64>> {
         let j = (b as isize - c1 as isize).rem_euclid(n1 as isize) as usize;
         real[i * n1 + j] += v;
     }
-    let mut tmp = vec![Complex::new(0.0, 0.0); fft.spectrum_len()];
-    let mut hat = tmp.clone();
-    fft.forward(&mut real, &mut tmp, &mut hat);
+    let mut hat = zeroed_vec(fft.spectrum_len(), Complex::new(0.0, 0.0));
+    fft.forward(real, tmp, &mut hat);
     hat
 }
 
@@ -542,19 +556,24 @@ impl MultiConvolver {
         n1: usize,
     ) -> MultiConvolver {
         let fft = Fft2::new(n0.max(rows).max(1), n1.max(cols).max(1));
-        let kernel_hats = kernels.iter().map(|k| kernel_hat(&fft, k.view())).collect();
         let (n0, n1) = fft.shape();
         let len = fft.spectrum_len();
         let zero = Complex::new(0.0, 0.0);
+        let mut real = zeroed_vec(n0 * n1, 0.0);
+        let mut tmp = zeroed_vec(len, zero);
+        let kernel_hats = kernels
+            .iter()
+            .map(|k| kernel_hat_with(&fft, k.view(), &mut real, &mut tmp))
+            .collect();
         MultiConvolver {
             fft,
             rows,
             cols,
             kernel_hats,
-            real: vec![0.0; n0 * n1],
-            tmp: vec![zero; len],
-            spec: vec![zero; len],
-            acc: vec![zero; len],
+            real,
+            tmp,
+            spec: zeroed_vec(len, zero),
+            acc: zeroed_vec(len, zero),
             live: Vec::new(),
             live_cols: Vec::new(),
             colbuf: Vec::new(),
@@ -568,18 +587,24 @@ impl MultiConvolver {
 
     /// Adds a kernel (one forward transform); returns its index for [`Self::apply_sum`].
     pub fn push_kernel(&mut self, kernel: ArrayView2<f64>) -> usize {
-        self.kernel_hats.push(kernel_hat(&self.fft, kernel));
+        let hat = kernel_hat_with(&self.fft, kernel, &mut self.real, &mut self.tmp);
+        self.kernel_hats.push(hat);
         self.kernel_hats.len() - 1
     }
 
     /// Replaces kernel `idx` (one forward transform).
     pub fn set_kernel(&mut self, idx: usize, kernel: ArrayView2<f64>) {
-        self.kernel_hats[idx] = kernel_hat(&self.fft, kernel);
+        self.kernel_hats[idx] = kernel_hat_with(&self.fft, kernel, &mut self.real, &mut self.tmp);
     }
 
     /// Keeps only the first `n` kernels (drops cached ones).
     pub fn truncate_kernels(&mut self, n: usize) {
         self.kernel_hats.truncate(n);
+    }
+
+    /// Input shape (rows, cols) the convolver was built for.
+    pub fn input_dim(&self) -> (usize, usize) {
+        (self.rows, self.cols)
     }
 
     pub fn kernel_count(&self) -> usize {

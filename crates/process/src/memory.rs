@@ -13,6 +13,14 @@
 //! the benches call it at start. The cost is that up to [`TRIM_THRESHOLD`] bytes of freed
 //! memory stay with the process instead of returning to the system. Elsewhere than Linux with
 //! glibc it does nothing.
+//!
+//! [`zeroed_vec`] allocates a large working buffer (a spectrum, a dwell map of a 1001^2 grid)
+//! and asks the kernel to back it with transparent huge pages where the system leaves that to
+//! the program (`/sys/kernel/mm/transparent_hugepage/enabled` = `madvise`, as on the project's
+//! machines): a fresh buffer is then faulted in 2 MiB at a time instead of 4 KiB. Measured on
+//! the vibration coupling bench (1001^2, ten dwell channels, seven kernel spectra) with glibc's
+//! own switch for this (`GLIBC_TUNABLES=glibc.malloc.hugetlb=1`), alternately twice: 701, 703 ms
+//! without, 640, 573 ms with.
 
 /// Blocks up to this size come from malloc's heaps instead of fresh mappings (bytes; glibc
 /// takes at most 32 MiB on 64-bit); larger ones (a 4096^2 map is 128 MiB) are still mapped
@@ -43,8 +51,61 @@ pub fn retain_freed_memory() -> bool {
     }
 }
 
+/// Buffers smaller than this are left to the allocator as they are (bytes): a huge page is
+/// 2 MiB, and only the 2 MiB-aligned interior of a buffer can be backed by them.
+pub const HUGE_PAGE_MIN_BYTES: usize = 4 << 20;
+
+/// `n` copies of `zero` in a new vector whose storage is advised for transparent huge pages
+/// before it is first written (see the module docs). Elsewhere than Linux, or below
+/// [`HUGE_PAGE_MIN_BYTES`], it is `vec![zero; n]`.
+pub fn zeroed_vec<T: Clone>(n: usize, zero: T) -> Vec<T> {
+    let bytes = n.saturating_mul(std::mem::size_of::<T>());
+    if bytes < HUGE_PAGE_MIN_BYTES {
+        return vec![zero; n];
+    }
+    let mut v: Vec<T> = Vec::with_capacity(n);
+    advise_huge_pages(v.spare_capacity_mut().as_mut_ptr() as usize, bytes);
+    v.resize(n, zero);
+    v
+}
+
+/// Advises the 2 MiB-aligned pages inside `[start, start + len)` for transparent huge pages
+/// (Linux with glibc's libc crate; advice only: the contents and the mapping are unchanged, and a refusal is ignored).
+fn advise_huge_pages(start: usize, len: usize) {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        const HUGE: usize = 2 << 20;
+        let lo = start.div_ceil(HUGE) * HUGE;
+        let hi = (start + len) / HUGE * HUGE;
+        if hi > lo {
+            // SAFETY: [lo, hi) lies inside an allocation this process owns and has not handed
+            // out yet; MADV_HUGEPAGE changes how the kernel backs the range, never its contents
+            // or its validity, and its only failure (EINVAL where THP is absent) is harmless.
+            unsafe {
+                libc::madvise(lo as *mut libc::c_void, hi - lo, libc::MADV_HUGEPAGE);
+            }
+        }
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        let _ = (start, len);
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn zeroed_vectors_are_zero_at_every_size() {
+        for n in [0, 1, 1000, (5 << 20) / 8 + 3] {
+            let v = super::zeroed_vec(n, 0.0f64);
+            assert_eq!(v.len(), n);
+            assert!(v.iter().all(|x| *x == 0.0));
+            let c = super::zeroed_vec(n / 2, [1.5f64; 3]);
+            assert_eq!(c.len(), n / 2);
+            assert!(c.iter().all(|x| *x == [1.5; 3]));
+        }
+    }
+
     /// glibc takes both thresholds (it silently refused an mmap threshold of 64 MiB).
     #[test]
     #[cfg(all(target_os = "linux", target_env = "gnu"))]

@@ -28,15 +28,13 @@
 //!
 //! Units: mm, s, nm/s; dwell in s per pixel; removal in nm.
 
-use std::borrow::Cow;
-
-use ndarray::{Array2, ArrayView2};
+use ndarray::{Array2, ArrayView2, CowArray, Ix2, ShapeBuilder};
 use rayon::prelude::*;
 
 use crate::fft::{fast_len, MultiConvolver};
 use crate::grid::Grid;
 use crate::modulated::Modulation;
-use crate::removal::cubic_taps;
+use crate::removal::keys_weights;
 use crate::tif::RateField;
 
 /// A map axis (the direction of a lateral displacement).
@@ -265,46 +263,138 @@ pub enum Derivative {
 
 /// `N` weighted dwell maps (s per pixel) on one grid, interleaved per pixel so one pass over the
 /// samples fills every channel.
+///
+/// Consecutive samples on one raster line share their row (an X scan) or column (a Y scan)
+/// and so one of the two cubic weight vectors; while they also share the base pixel, their
+/// other-axis taps are summed first and spread over the shared axis once (4 N multiply-adds a
+/// sample instead of 16 N). [`WeightedDwell::finish`] spreads the last such run; the readers
+/// require it.
 #[derive(Debug, Clone)]
 pub struct WeightedDwell<const N: usize> {
     pub grid: Grid,
     data: Vec<[f64; N]>,
+    pending: Option<Pending<N>>,
+    /// Fractional (row, col) index of the previous sample, bit for bit.
+    last: (u64, u64),
+}
+
+/// Samples sharing base pixel (i0, j0) and, bit for bit, their fraction on `shared`: their
+/// dwell times weight times the taps along the other axis, summed.
+#[derive(Debug, Clone)]
+struct Pending<const N: usize> {
+    i0: isize,
+    j0: isize,
+    shared: Shared,
+    frac: f64,
+    acc: [[f64; N]; 4],
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Shared {
+    Row,
+    Col,
 }
 
 impl<const N: usize> WeightedDwell<N> {
     pub fn new(grid: Grid) -> Self {
         WeightedDwell {
             grid,
-            data: vec![[0.0; N]; grid.rows * grid.cols],
+            data: crate::memory::zeroed_vec(grid.rows * grid.cols, [0.0; N]),
+            pending: None,
+            last: (u64::MAX, u64::MAX),
         }
     }
 
     /// Adds dt · w[c] at (x, y) mm to every channel c, 4 x 4 Keys cubic weights (mass, centroid
     /// and second moment kept). The bilinear splat low-passes the weighted dwell along the path
     /// by sinc²(f dx): on the sample run's 0.25 mm pixels 8 % of the imprint's power at
-    /// 0.46 per mm (the spindle imprint band), where the samples are few enough (the run's
-    /// duration times the sample rate) that the 16 taps cost nothing next to the transforms.
+    /// 0.46 per mm (the spindle imprint band).
     pub fn add(&mut self, x_mm: f64, y_mm: f64, dt_s: f64, w: &[f64; N]) {
         let g = &self.grid;
         let (u, v) = g.frac_index(x_mm, y_mm);
-        let data = &mut self.data;
-        cubic_taps(g.rows, g.cols, u, v, |i, j, wi, wj| {
-            let k = wi * wj * dt_s;
-            let cell = &mut data[i * g.cols + j];
+        if !(u > -2.0 && v > -2.0 && u < g.rows as f64 + 1.0 && v < g.cols as f64 + 1.0) {
+            return;
+        }
+        let (i0, j0) = (u.floor() as isize, v.floor() as isize);
+        let (fu, fv) = (u - i0 as f64, v - j0 as f64);
+        let last = std::mem::replace(&mut self.last, (fu.to_bits(), fv.to_bits()));
+        let fits = |p: &Pending<N>| {
+            p.i0 == i0
+                && p.j0 == j0
+                && match p.shared {
+                    Shared::Row => p.frac.to_bits() == fu.to_bits(),
+                    Shared::Col => p.frac.to_bits() == fv.to_bits(),
+                }
+        };
+        if !self.pending.as_ref().is_some_and(fits) {
+            self.flush();
+            let (shared, frac) = if last.1 == fv.to_bits() && last.0 != fu.to_bits() {
+                (Shared::Col, fv)
+            } else {
+                (Shared::Row, fu)
+            };
+            self.pending = Some(Pending {
+                i0,
+                j0,
+                shared,
+                frac,
+                acc: [[0.0; N]; 4],
+            });
+        }
+        let p = self.pending.as_mut().expect("set above");
+        let taps = keys_weights(if p.shared == Shared::Row { fv } else { fu });
+        for (row, t) in p.acc.iter_mut().zip(taps) {
+            let k = t * dt_s;
             for c in 0..N {
-                cell[c] += k * w[c];
+                row[c] += k * w[c];
             }
-        });
+        }
+    }
+
+    /// Spreads the samples summed last (see the type's docs); call after the last `add`.
+    pub fn finish(&mut self) {
+        self.flush();
+    }
+
+    fn flush(&mut self) {
+        let Some(p) = self.pending.take() else { return };
+        let g = &self.grid;
+        let shared = keys_weights(p.frac);
+        for (a, &ws) in shared.iter().enumerate() {
+            for (b, other) in p.acc.iter().enumerate() {
+                let (i, j) = match p.shared {
+                    Shared::Row => (p.i0 - 1 + a as isize, p.j0 - 1 + b as isize),
+                    Shared::Col => (p.i0 - 1 + b as isize, p.j0 - 1 + a as isize),
+                };
+                if i < 0 || j < 0 || i as usize >= g.rows || j as usize >= g.cols {
+                    continue;
+                }
+                let cell = &mut self.data[i as usize * g.cols + j as usize];
+                for c in 0..N {
+                    cell[c] += ws * other[c];
+                }
+            }
+        }
     }
 
     /// Channel `c` as a map on the grid.
     pub fn channel(&self, c: usize) -> Array2<f64> {
+        self.channel_view(c).to_owned()
+    }
+
+    /// Channel `c` as a strided view of the interleaved data (no copy).
+    pub fn channel_view(&self, c: usize) -> ArrayView2<'_, f64> {
+        assert!(c < N, "channel {c} of {N}");
+        assert!(self.pending.is_none(), "WeightedDwell read before finish()");
         let g = &self.grid;
-        Array2::from_shape_fn((g.rows, g.cols), |(i, j)| self.data[i * g.cols + j][c])
+        let flat = self.data.as_flattened();
+        ArrayView2::from_shape((g.rows, g.cols).strides((g.cols * N, N)), &flat[c..])
+            .expect("the interleaved layout holds every channel")
     }
 
     /// True when channel `c` received nothing.
     pub fn is_zero(&self, c: usize) -> bool {
+        assert!(self.pending.is_none(), "WeightedDwell read before finish()");
         self.data.iter().all(|v| v[c] == 0.0)
     }
 }
@@ -338,18 +428,40 @@ impl KernelConvolver {
     }
 
     /// `sum (channel ⊛ kernel)` on the dwell grid.
-    pub fn apply(&mut self, terms: &[(&Array2<f64>, Derivative)]) -> Array2<f64> {
+    pub fn apply(&mut self, terms: &[(ArrayView2<'_, f64>, Derivative)]) -> Array2<f64> {
+        self.apply_window(terms, (0, 0), self.conv.input_dim())
+    }
+
+    /// [`KernelConvolver::apply`] on the window of `shape` at `origin` of the dwell grid only
+    /// (the map grid inside its grown dwell grid, with no full-size output formed).
+    pub fn apply_window(
+        &mut self,
+        terms: &[(ArrayView2<'_, f64>, Derivative)],
+        origin: (usize, usize),
+        shape: (usize, usize),
+    ) -> Array2<f64> {
         // Channels sharing a kernel are added first (one transform each kernel).
-        let mut sums: [Option<Cow<'_, Array2<f64>>>; 7] = Default::default();
-        for &(map, k) in terms {
-            match &mut sums[k as usize] {
-                Some(c) => *c.to_mut() += map,
-                s => *s = Some(Cow::Borrowed(map)),
-            }
+        let mut by_kernel: [Vec<ArrayView2<'_, f64>>; 7] = Default::default();
+        for (map, k) in terms {
+            by_kernel[*k as usize].push(map.view());
         }
+        let sums: Vec<Option<CowArray<'_, f64, Ix2>>> = by_kernel
+            .iter()
+            .map(|maps| match maps.as_slice() {
+                [] => None,
+                [one] => Some(CowArray::from(one.view())),
+                [first, rest @ ..] => {
+                    let mut sum = first.to_owned();
+                    for m in rest {
+                        sum += m;
+                    }
+                    Some(CowArray::from(sum))
+                }
+            })
+            .collect();
         let inputs: Vec<Option<ArrayView2<f64>>> =
             sums.iter().map(|s| s.as_ref().map(|c| c.view())).collect();
-        self.conv.apply_sum(&inputs)
+        self.conv.apply_sum_window(&inputs, origin, shape)
     }
 }
 
@@ -360,7 +472,9 @@ pub fn convolve_channels(
     dwell_grid: &Grid,
     terms: &[(&Array2<f64>, Derivative)],
 ) -> Array2<f64> {
-    KernelConvolver::new(kernels, dwell_grid).apply(terms)
+    let views: Vec<(ArrayView2<f64>, Derivative)> =
+        terms.iter().map(|(m, k)| (m.view(), *k)).collect();
+    KernelConvolver::new(kernels, dwell_grid).apply(&views)
 }
 
 #[cfg(test)]
@@ -454,6 +568,7 @@ mod tests {
         let g = Grid::new(20, 20, 0.5, 0.25, 1.0, -2.0).unwrap();
         let mut d = WeightedDwell::<2>::new(g);
         d.add(4.37, 0.113, 2.0, &[1.0, -3.0]);
+        d.finish();
         let (c0, c1) = (d.channel(0), d.channel(1));
         let (mut m0, mut mx, mut my) = (0.0, 0.0, 0.0);
         for ((i, j), &w) in c0.indexed_iter() {
@@ -465,6 +580,88 @@ mod tests {
         assert!((mx / m0 - 4.37).abs() < 1e-12 && (my / m0 - 0.113).abs() < 1e-12);
         assert!((c1.sum() + 6.0).abs() < 1e-12);
         assert!(!d.is_zero(1));
+    }
+
+    /// The run-summed splat against each sample's own 16 taps: samples along X lines (one row
+    /// fraction), along Y lines, and scattered, with the grid's borders crossed.
+    #[test]
+    fn summed_runs_splat_as_every_sample_on_its_own() {
+        let g = Grid::new(17, 23, 0.25, 0.5, -1.0, 2.0).unwrap();
+        let mut rng = bonnetlab_surface::rng::Rng::new(11);
+        let mut pts: Vec<(f64, f64)> = Vec::new();
+        for k in 0..400 {
+            pts.push((-2.0 + k as f64 * 0.037, 2.0 + 1.37));
+        }
+        for k in 0..300 {
+            pts.push((1.3, 1.0 + k as f64 * 0.029));
+        }
+        for _ in 0..200 {
+            pts.push((rng.uniform() * 13.0 - 2.5, rng.uniform() * 6.0 + 1.0));
+        }
+        let mut d = WeightedDwell::<3>::new(g);
+        let mut want = vec![[0.0f64; 3]; g.rows * g.cols];
+        for &(x, y) in &pts {
+            let w = [rng.normal(), 1.0, rng.uniform()];
+            let dt = 0.01 + rng.uniform();
+            d.add(x, y, dt, &w);
+            let (u, v) = g.frac_index(x, y);
+            crate::removal::cubic_taps(g.rows, g.cols, u, v, |i, j, wi, wj| {
+                for c in 0..3 {
+                    want[i * g.cols + j][c] += wi * wj * dt * w[c];
+                }
+            });
+        }
+        d.finish();
+        let mut worst = 0.0f64;
+        for c in 0..3 {
+            let m = d.channel(c);
+            for ((i, j), v) in m.indexed_iter() {
+                worst = worst.max((v - want[i * g.cols + j][c]).abs());
+            }
+        }
+        assert!(worst < 1e-12, "{worst}");
+        assert!(want.iter().any(|v| v[1] > 0.1));
+    }
+
+    #[test]
+    fn channel_views_read_the_interleaved_splat_and_windows_match_the_full_convolution() {
+        let g = GaussianTif::new(1.0, 6.0, 2.0).unwrap();
+        let t = OffsetTif::new(&g, 0.6, 20.0, 0.5);
+        let k = DerivativeKernels::sample(&t, 0.5, 0.5, Axis::X);
+        let (hy, hx) = k.half;
+        let grid = Grid::new(2 * hy + 13, 2 * hx + 9, 0.5, 0.5, 0.0, 0.0).unwrap();
+        let mut d = WeightedDwell::<3>::new(grid);
+        let mut rng = bonnetlab_surface::rng::Rng::new(7);
+        for _ in 0..40 {
+            let (x, y) = (rng.uniform() * 4.0 + 1.0, rng.uniform() * 5.0 + 1.0);
+            d.add(x, y, 0.1, &[rng.normal(), rng.normal(), 1.0]);
+        }
+        d.finish();
+        for c in 0..3 {
+            let (v, owned) = (d.channel_view(c), d.channel(c));
+            assert_eq!(v.dim(), (grid.rows, grid.cols));
+            assert!(v.iter().zip(owned.iter()).all(|(a, b)| a == b));
+        }
+        let mut conv = KernelConvolver::new(&k, &grid);
+        // Two channels on one kernel are summed before their transform.
+        let terms = [
+            (d.channel_view(0), Derivative::H),
+            (d.channel_view(1), Derivative::H),
+            (d.channel_view(2), Derivative::Lh),
+        ];
+        let full = conv.apply(&terms);
+        let (o, shape) = ((3, 2), (grid.rows - 5, grid.cols - 4));
+        let win = conv.apply_window(&terms, o, shape);
+        let sum01 = &d.channel(0) + &d.channel(1);
+        let direct = conv.apply(&[
+            (sum01.view(), Derivative::H),
+            (d.channel_view(2), Derivative::Lh),
+        ]);
+        for ((i, j), v) in win.indexed_iter() {
+            assert!((v - full[(i + o.0, j + o.1)]).abs() < 1e-12);
+            assert!((full[(i + o.0, j + o.1)] - direct[(i + o.0, j + o.1)]).abs() < 1e-12);
+        }
+        assert!(full.iter().any(|v| v.abs() > 1e-6));
     }
 
     #[test]

@@ -93,7 +93,7 @@ pub fn dwell_map_with(
 }
 
 /// Keys cubic-convolution weights (a = -1/2) for taps at -1, 0, 1, 2 around fraction f.
-fn keys_weights(f: f64) -> [f64; 4] {
+pub(crate) fn keys_weights(f: f64) -> [f64; 4] {
     let w = |t: f64| {
         let t = t.abs();
         if t <= 1.0 {

@@ -38,6 +38,7 @@ fn main() {
     {
         c8.add(s.x_mm, s.y_mm, s.dt_s, &[s.u_mm; 8]);
     }
+    c8.finish();
     eprintln!("stream + splat {:?}", t.elapsed());
     for _ in 0..2 {
         let t = Instant::now();

@@ -24,7 +24,7 @@ use bonnetlab_process::perturb::{
     Axis, Derivative, DerivativeKernels, KernelConvolver, OffsetTif, WeightedDwell,
 };
 use bonnetlab_process::tif::RateField;
-use ndarray::{s, Array2};
+use ndarray::{Array2, ArrayView2};
 
 /// Weighted dwell channels: −u, ½u², δ_det, ½δ_det², δ_noise, ½δ_noise², δ_det δ_noise, −u δ,
 /// δ_det³/6, δ_det⁴/24.
@@ -195,23 +195,22 @@ pub fn fast_maps_lagged(
             }
         }
     });
+    ch.finish();
 
     let mut conv = KernelConvolver::new(&kern, &ext);
-    let channels: Vec<Option<Array2<f64>>> = (0..NV)
-        .map(|c| (!ch.is_zero(c)).then(|| ch.channel(c)))
-        .collect();
-    drop(ch);
+    // The channels are read in place (strided views of the interleaved splat) and only the
+    // map grid's window of each convolution is formed.
+    let live: Vec<bool> = (0..NV).map(|c| !ch.is_zero(c)).collect();
     let mut out = |terms: &[(usize, Derivative)]| -> Array2<f64> {
-        let t: Vec<(&Array2<f64>, Derivative)> = terms
+        let t: Vec<(ArrayView2<f64>, Derivative)> = terms
             .iter()
-            .filter_map(|&(c, k)| channels[c].as_ref().map(|m| (m, k)))
+            .filter(|&&(c, _)| live[c])
+            .map(|&(c, k)| (ch.channel_view(c), k))
             .collect();
         if t.is_empty() {
             return zeros();
         }
-        conv.apply(&t)
-            .slice(s![hy..hy + g.rows, hx..hx + g.cols])
-            .to_owned()
+        conv.apply_window(&t, (hy, hx), (g.rows, g.cols))
     };
     maps.lateral_jitter = out(&[(0, Derivative::L), (1, Derivative::Ll)]);
     maps.normal_offset = out(&[
