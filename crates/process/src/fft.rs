@@ -8,7 +8,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
-use crate::memory::zeroed_vec;
+use crate::memory::zeroed_dense;
 use ndarray::{Array2, ArrayView2};
 use rayon::prelude::*;
 use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
@@ -486,8 +486,8 @@ impl Convolver {
 /// (wrapped), for a transform of `fft`'s size.
 fn kernel_hat(fft: &Fft2, kernel: ArrayView2<f64>) -> Vec<Complex<f64>> {
     let (n0, n1) = fft.shape();
-    let mut real = zeroed_vec(n0 * n1, 0.0);
-    let mut tmp = zeroed_vec(fft.spectrum_len(), Complex::new(0.0, 0.0));
+    let mut real = zeroed_dense(n0 * n1);
+    let mut tmp = zeroed_dense(fft.spectrum_len());
     kernel_hat_with(fft, kernel, &mut real, &mut tmp)
 }
 
@@ -508,7 +508,7 @@ fn kernel_hat_with(
         let j = (b as isize - c1 as isize).rem_euclid(n1 as isize) as usize;
         real[i * n1 + j] += v;
     }
-    let mut hat = zeroed_vec(fft.spectrum_len(), Complex::new(0.0, 0.0));
+    let mut hat = zeroed_dense(fft.spectrum_len());
     fft.forward(real, tmp, &mut hat);
     hat
 }
@@ -558,9 +558,8 @@ impl MultiConvolver {
         let fft = Fft2::new(n0.max(rows).max(1), n1.max(cols).max(1));
         let (n0, n1) = fft.shape();
         let len = fft.spectrum_len();
-        let zero = Complex::new(0.0, 0.0);
-        let mut real = zeroed_vec(n0 * n1, 0.0);
-        let mut tmp = zeroed_vec(len, zero);
+        let mut real = zeroed_dense(n0 * n1);
+        let mut tmp = zeroed_dense(len);
         let kernel_hats = kernels
             .iter()
             .map(|k| kernel_hat_with(&fft, k.view(), &mut real, &mut tmp))
@@ -572,8 +571,8 @@ impl MultiConvolver {
             kernel_hats,
             real,
             tmp,
-            spec: zeroed_vec(len, zero),
-            acc: zeroed_vec(len, zero),
+            spec: zeroed_dense(len),
+            acc: zeroed_dense(len),
             live: Vec::new(),
             live_cols: Vec::new(),
             colbuf: Vec::new(),

@@ -14,7 +14,7 @@
 //! memory stay with the process instead of returning to the system. Elsewhere than Linux with
 //! glibc it does nothing.
 //!
-//! [`zeroed_vec`] allocates a large working buffer (a spectrum, a dwell map of a 1001^2 grid)
+//! [`zeroed_dense`] allocates a large working buffer (a spectrum, a dwell map of a 1001^2 grid)
 //! and asks the kernel to back it with transparent huge pages where the system leaves that to
 //! the program (`/sys/kernel/mm/transparent_hugepage/enabled` = `madvise`, as on the project's
 //! machines): a fresh buffer is then faulted in 2 MiB at a time instead of 4 KiB. Measured on
@@ -55,17 +55,46 @@ pub fn retain_freed_memory() -> bool {
 /// 2 MiB, and only the 2 MiB-aligned interior of a buffer can be backed by them.
 pub const HUGE_PAGE_MIN_BYTES: usize = 4 << 20;
 
-/// `n` copies of `zero` in a new vector whose storage is advised for transparent huge pages
-/// before it is first written (see the module docs). Elsewhere than Linux, or below
-/// [`HUGE_PAGE_MIN_BYTES`], it is `vec![zero; n]`.
-pub fn zeroed_vec<T: Clone>(n: usize, zero: T) -> Vec<T> {
-    let bytes = n.saturating_mul(std::mem::size_of::<T>());
-    if bytes < HUGE_PAGE_MIN_BYTES {
-        return vec![zero; n];
+/// Element types whose all-zero bit pattern is the value zero (so a zero-filled allocation is
+/// a valid vector of zeros).
+///
+/// # Safety
+/// Implement only for types for which every byte being 0 is a valid value.
+pub unsafe trait Zeroable: Copy {}
+// SAFETY: 0.0 is all zero bits; Complex<f64> is two f64 (repr(C)); arrays of them likewise.
+unsafe impl Zeroable for f64 {}
+unsafe impl Zeroable for rustfft::num_complex::Complex<f64> {}
+unsafe impl<const N: usize> Zeroable for [f64; N] {}
+
+/// `n` zeros from zero-filled memory: above the allocator's mmap threshold these are fresh pages
+/// the kernel maps on first touch, so parts never written (a dwell map away from the path)
+/// cost nothing, and nothing is written twice.
+pub fn zeroed<T: Zeroable>(n: usize) -> Vec<T> {
+    let layout = match std::alloc::Layout::array::<T>(n) {
+        Ok(l) if l.size() > 0 => l,
+        Ok(_) => return Vec::new(),
+        Err(_) => panic!("capacity overflow: {n} elements"),
+    };
+    // SAFETY: `layout` has a non-zero size; the block is zero-filled, which `T: Zeroable` makes
+    // `n` valid values of T; it was allocated by the global allocator with T's layout for
+    // exactly `n` elements, as `Vec::from_raw_parts` requires.
+    unsafe {
+        let ptr = std::alloc::alloc_zeroed(layout);
+        if ptr.is_null() {
+            std::alloc::handle_alloc_error(layout);
+        }
+        Vec::from_raw_parts(ptr as *mut T, n, n)
     }
-    let mut v: Vec<T> = Vec::with_capacity(n);
-    advise_huge_pages(v.spare_capacity_mut().as_mut_ptr() as usize, bytes);
-    v.resize(n, zero);
+}
+
+/// [`zeroed`] for a buffer that will be written in full (a spectrum, a transform's input):
+/// large ones are advised for transparent huge pages before first use (see the module docs).
+pub fn zeroed_dense<T: Zeroable>(n: usize) -> Vec<T> {
+    let mut v = zeroed::<T>(n);
+    let bytes = std::mem::size_of_val(v.as_slice());
+    if bytes >= HUGE_PAGE_MIN_BYTES {
+        advise_huge_pages(v.as_mut_ptr() as usize, bytes);
+    }
     v
 }
 
@@ -96,13 +125,18 @@ fn advise_huge_pages(start: usize, len: usize) {
 mod tests {
     #[test]
     fn zeroed_vectors_are_zero_at_every_size() {
+        use rustfft::num_complex::Complex;
         for n in [0, 1, 1000, (5 << 20) / 8 + 3] {
-            let v = super::zeroed_vec(n, 0.0f64);
+            let v = super::zeroed::<f64>(n);
             assert_eq!(v.len(), n);
             assert!(v.iter().all(|x| *x == 0.0));
-            let c = super::zeroed_vec(n / 2, [1.5f64; 3]);
+            let mut c = super::zeroed_dense::<Complex<f64>>(n / 2);
             assert_eq!(c.len(), n / 2);
-            assert!(c.iter().all(|x| *x == [1.5; 3]));
+            assert!(c.iter().all(|x| *x == Complex::new(0.0, 0.0)));
+            c.push(Complex::new(1.0, 2.0));
+            assert_eq!(c[n / 2], Complex::new(1.0, 2.0));
+            let a = super::zeroed::<[f64; 3]>(n / 3);
+            assert!(a.iter().all(|x| *x == [0.0; 3]));
         }
     }
 

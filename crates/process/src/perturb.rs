@@ -28,7 +28,7 @@
 //!
 //! Units: mm, s, nm/s; dwell in s per pixel; removal in nm.
 
-use ndarray::{Array2, ArrayView2, CowArray, Ix2, ShapeBuilder};
+use ndarray::{Array2, ArrayView2, CowArray, Ix2};
 use rayon::prelude::*;
 
 use crate::fft::{fast_len, MultiConvolver};
@@ -261,8 +261,8 @@ pub enum Derivative {
     Hhhh = 6,
 }
 
-/// `N` weighted dwell maps (s per pixel) on one grid, interleaved per pixel so one pass over the
-/// samples fills every channel.
+/// `N` weighted dwell maps (s per pixel) on one grid, filled in one pass over the samples; each
+/// channel is a contiguous map (read in place by [`WeightedDwell::channel_view`]).
 ///
 /// Consecutive samples on one raster line share their row (an X scan) or column (a Y scan)
 /// and so one of the two cubic weight vectors; while they also share the base pixel, their
@@ -272,7 +272,10 @@ pub enum Derivative {
 #[derive(Debug, Clone)]
 pub struct WeightedDwell<const N: usize> {
     pub grid: Grid,
-    data: Vec<[f64; N]>,
+    /// Channel-major: channel c is `data[c * cells..(c + 1) * cells]`.
+    data: Vec<f64>,
+    /// Channels that received a non-zero weight.
+    touched: [bool; N],
     pending: Option<Pending<N>>,
     /// Fractional (row, col) index of the previous sample, bit for bit.
     last: (u64, u64),
@@ -299,7 +302,8 @@ impl<const N: usize> WeightedDwell<N> {
     pub fn new(grid: Grid) -> Self {
         WeightedDwell {
             grid,
-            data: crate::memory::zeroed_vec(grid.rows * grid.cols, [0.0; N]),
+            data: crate::memory::zeroed(N * grid.rows * grid.cols),
+            touched: [false; N],
             pending: None,
             last: (u64::MAX, u64::MAX),
         }
@@ -341,6 +345,9 @@ impl<const N: usize> WeightedDwell<N> {
                 acc: [[0.0; N]; 4],
             });
         }
+        for (t, wc) in self.touched.iter_mut().zip(w) {
+            *t |= *wc != 0.0 && dt_s != 0.0;
+        }
         let p = self.pending.as_mut().expect("set above");
         let taps = keys_weights(if p.shared == Shared::Row { fv } else { fu });
         for (row, t) in p.acc.iter_mut().zip(taps) {
@@ -359,6 +366,7 @@ impl<const N: usize> WeightedDwell<N> {
     fn flush(&mut self) {
         let Some(p) = self.pending.take() else { return };
         let g = &self.grid;
+        let cells = g.rows * g.cols;
         let shared = keys_weights(p.frac);
         for (a, &ws) in shared.iter().enumerate() {
             for (b, other) in p.acc.iter().enumerate() {
@@ -369,9 +377,9 @@ impl<const N: usize> WeightedDwell<N> {
                 if i < 0 || j < 0 || i as usize >= g.rows || j as usize >= g.cols {
                     continue;
                 }
-                let cell = &mut self.data[i as usize * g.cols + j as usize];
+                let at = i as usize * g.cols + j as usize;
                 for c in 0..N {
-                    cell[c] += ws * other[c];
+                    self.data[c * cells + at] += ws * other[c];
                 }
             }
         }
@@ -382,20 +390,20 @@ impl<const N: usize> WeightedDwell<N> {
         self.channel_view(c).to_owned()
     }
 
-    /// Channel `c` as a strided view of the interleaved data (no copy).
+    /// Channel `c` as a view of its map (no copy).
     pub fn channel_view(&self, c: usize) -> ArrayView2<'_, f64> {
         assert!(c < N, "channel {c} of {N}");
         assert!(self.pending.is_none(), "WeightedDwell read before finish()");
         let g = &self.grid;
-        let flat = self.data.as_flattened();
-        ArrayView2::from_shape((g.rows, g.cols).strides((g.cols * N, N)), &flat[c..])
-            .expect("the interleaved layout holds every channel")
+        let cells = g.rows * g.cols;
+        ArrayView2::from_shape((g.rows, g.cols), &self.data[c * cells..(c + 1) * cells])
+            .expect("each channel holds rows x cols values")
     }
 
-    /// True when channel `c` received nothing.
+    /// True when channel `c` received no non-zero weight.
     pub fn is_zero(&self, c: usize) -> bool {
         assert!(self.pending.is_none(), "WeightedDwell read before finish()");
-        self.data.iter().all(|v| v[c] == 0.0)
+        !self.touched[c]
     }
 }
 
