@@ -378,8 +378,8 @@ impl<const N: usize> WeightedDwell<N> {
                     continue;
                 }
                 let at = i as usize * g.cols + j as usize;
-                for c in 0..N {
-                    self.data[c * cells + at] += ws * other[c];
+                for (c, o) in other.iter().enumerate() {
+                    self.data[c * cells + at] += ws * o;
                 }
             }
         }
@@ -622,9 +622,9 @@ mod tests {
         d.finish();
         let mut worst = 0.0f64;
         for c in 0..3 {
-            let m = d.channel(c);
-            for ((i, j), v) in m.indexed_iter() {
-                worst = worst.max((v - want[i * g.cols + j][c]).abs());
+            for ((i, j), v) in d.channel(c).indexed_iter() {
+                let cell: &[f64; 3] = &want[i * g.cols + j];
+                worst = worst.max((v - cell[c]).abs());
             }
         }
         assert!(worst < 1e-12, "{worst}");
