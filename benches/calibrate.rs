@@ -36,18 +36,9 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
-/// CPU time of this process so far (user + system, all threads, s), from /proc/self/stat.
+/// CPU time of this process so far (user + system, all threads, s; NaN where unknown).
 fn cpu_s() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    let after = stat.rsplit(')').next().unwrap_or("");
-    let f: Vec<&str> = after.split_whitespace().collect();
-    let ticks = |i: usize| {
-        f.get(i)
-            .and_then(|v| v.parse::<f64>().ok())
-            .unwrap_or(f64::NAN)
-    };
-    // Fields 14 and 15 of the stat line (utime, stime) are 11 and 12 after the ')'.
-    (ticks(11) + ticks(12)) / 100.0
+    bonnetlab_process::usage::cpu_seconds().unwrap_or(f64::NAN)
 }
 
 fn once(n: usize) {

@@ -33,16 +33,6 @@ fn case(
     (name.to_string(), c)
 }
 
-/// User + system CPU time of this process (s), all threads; None off Linux.
-fn cpu_s() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // Fields after the command name (which is in parentheses and may contain spaces).
-    let rest = &stat[stat.rfind(')')? + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
-    Some(ticks / 100.0)
-}
-
 fn main() {
     // As the command line does (see bonnetlab_process::memory).
     bonnetlab_process::memory::retain_freed_memory();
@@ -136,13 +126,13 @@ fn main() {
                 continue;
             }
         };
-        let c0 = cpu_s();
+        let c0 = bonnetlab_process::usage::cpu_seconds();
         let t = Instant::now();
         let out = run
             .problem()
             .and_then(|p| calibrate(&p, &Options::default()));
         let wall = t.elapsed().as_secs_f64();
-        let cpu = match (c0, cpu_s()) {
+        let cpu = match (c0, bonnetlab_process::usage::cpu_seconds()) {
             (Some(a), Some(b)) => format!("{:.2}", b - a),
             _ => String::new(),
         };

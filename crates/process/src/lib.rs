@@ -20,6 +20,7 @@ pub mod recipe;
 pub mod removal;
 pub mod simulate;
 pub mod tif;
+pub mod usage;
 
 pub use error::ProcessError;
 pub use grid::Grid;

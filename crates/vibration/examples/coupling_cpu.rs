@@ -11,15 +11,6 @@ use bonnetlab_vibration::coupling::{fast_maps, CouplingCase, CouplingOptions};
 use bonnetlab_vibration::params::Bonnet;
 use std::time::Instant;
 
-/// User + system CPU time of this process (s), all threads; None off Linux.
-fn cpu_s() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    let rest = &stat[stat.rfind(')')? + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
-    Some(ticks / 100.0)
-}
-
 fn main() {
     let n: usize = std::env::args()
         .nth(1)
@@ -29,12 +20,12 @@ fn main() {
     let input = case.input();
     let opts = CouplingOptions::default();
     let _ = fast_maps(&input, Bonnet::Original, &opts).expect("coupling");
-    let (c0, t0) = (cpu_s(), Instant::now());
+    let (c0, t0) = (bonnetlab_process::usage::cpu_seconds(), Instant::now());
     for _ in 0..n {
         std::hint::black_box(fast_maps(&input, Bonnet::Original, &opts).expect("coupling"));
     }
     let wall = t0.elapsed().as_secs_f64() / n as f64;
-    match (c0, cpu_s()) {
+    match (c0, bonnetlab_process::usage::cpu_seconds()) {
         (Some(a), Some(b)) => println!(
             "per call: cpu {:.3} s, wall {:.3} s ({n} calls)",
             (b - a) / n as f64,
