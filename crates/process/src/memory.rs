@@ -61,10 +61,9 @@ pub const HUGE_PAGE_MIN_BYTES: usize = 4 << 20;
 /// # Safety
 /// Implement only for types for which every byte being 0 is a valid value.
 pub unsafe trait Zeroable: Copy {}
-// SAFETY: 0.0 is all zero bits; Complex<f64> is two f64 (repr(C)); arrays of them likewise.
+// SAFETY: 0.0 is all zero bits; Complex<f64> is two f64 (repr(C)).
 unsafe impl Zeroable for f64 {}
 unsafe impl Zeroable for rustfft::num_complex::Complex<f64> {}
-unsafe impl<const N: usize> Zeroable for [f64; N] {}
 
 /// `n` zeros from zero-filled memory: above the allocator's mmap threshold these are fresh pages
 /// the kernel maps on first touch, so parts never written (a dwell map away from the path)
@@ -135,8 +134,6 @@ mod tests {
             assert!(c.iter().all(|x| *x == Complex::new(0.0, 0.0)));
             c.push(Complex::new(1.0, 2.0));
             assert_eq!(c[n / 2], Complex::new(1.0, 2.0));
-            let a = super::zeroed::<[f64; 3]>(n / 3);
-            assert!(a.iter().all(|x| *x == [0.0; 3]));
         }
     }
 
