@@ -2,7 +2,9 @@
 //! centre rate, contact radius, pressure exponent, lever and precession azimuth, by
 //! Levenberg-Marquardt on the pixel values (point samples), each step solved by the project's
 //! least squares (`bonnetlab_surface::lsq`, QR of the Jacobian with Marquardt's damping rows,
-//! never the normal equations).
+//! never the normal equations). The bonnet's Jacobian is analytic
+//! ([`BonnetShape::rate_partials`]): one pass over the pixels per iteration instead of one
+//! evaluation per parameter.
 //!
 //! Why: a footprint with a square-root rim (Hertz contact) is not band-limited, so no
 //! interpolation of its pixels reproduces the rim between them; the model does, and the
@@ -124,9 +126,22 @@ pub fn fit_shape(
     let values = |p: &[f64]| {
         let s = shape_of(p, steps);
         let az = s.azimuths();
-        pts.par_iter()
-            .map(|&(x, y, _)| s.rate_with(x - p[0], y - p[1], &az))
-            .collect::<Vec<f64>>()
+        by_chunks(&pts, |&(x, y, _)| s.rate_with(x - p[0], y - p[1], &az))
+    };
+    // The analytic Jacobian in the fitted parameters (x0, y0 enter as x - x0, y - y0; gamma
+    // is constant where `shape_of` clamps it).
+    let gradient = |p: &[f64]| -> Vec<Vec<f64>> {
+        let s = shape_of(p, steps);
+        let az = s.azimuths();
+        let g_free = (0.05..50.0).contains(&p[4].exp());
+        let rows = by_chunks(&pts, |&(x, y, _)| {
+            let (r, d) = s.rate_partials(x - p[0], y - p[1], &az);
+            let dg = if g_free { d[3] } else { 0.0 };
+            [-d[0], -d[1], r, d[2], dg, d[4], d[5]]
+        });
+        (0..NP)
+            .map(|k| rows.iter().map(|row| row[k]).collect())
+            .collect()
     };
     // Forward differences: lengths in mm scaled to the footprint, logs and angles absolute.
     let h = [1e-5 * a0, 1e-5 * a0, 1e-6, 1e-6, 1e-6, 1e-6, 1e-6];
@@ -148,7 +163,9 @@ pub fn fit_shape(
             (2.0 * a0).ln(),
             0.0,
         ];
-        if let Some((p, cost, it)) = levenberg_marquardt(&pts, p0, &values, &h, &clamp, 10) {
+        if let Some((p, cost, it)) =
+            levenberg_marquardt(&pts, p0, &values, Some(&gradient), &h, &clamp, 10)
+        {
             if best.as_ref().is_none_or(|b| cost < b.1) {
                 best = Some((p, cost, it));
             }
@@ -156,7 +173,7 @@ pub fn fit_shape(
     }
     // The best start carried on to convergence.
     let (p, _, it0) = best?;
-    let (p, cost, it1) = levenberg_marquardt(&pts, p, &values, &h, &clamp, 60)?;
+    let (p, cost, it1) = levenberg_marquardt(&pts, p, &values, Some(&gradient), &h, &clamp, 60)?;
     let shape = shape_of(&p, steps);
     if !(shape.a_mm > 0.5 * dx.max(dy) && shape.a_mm <= window_mm && shape.peak.is_finite()) {
         return None;
@@ -187,9 +204,7 @@ pub fn fit_smooth(
     let a0 = start.a_mm.max(2.0 * dx.max(dy));
     let values = |p: &[f64]| {
         let s = smooth_of(p);
-        pts.par_iter()
-            .map(|&(x, y, _)| s.rate_at(x - p[0], y - p[1]))
-            .collect::<Vec<f64>>()
+        by_chunks(&pts, |&(x, y, _)| s.rate_at(x - p[0], y - p[1]))
     };
     let h = [1e-5 * a0, 1e-5 * a0, 1e-6, 1e-6, 1e-6];
     let clamp = |q: &mut [f64]| {
@@ -198,7 +213,7 @@ pub fn fit_smooth(
     };
     // The support is where the spot falls to about 0.5 % of its peak: 3.3 sigma of a Gaussian.
     let p0 = vec![0.0, 0.0, start.peak.max(1e-12).ln(), (a0 / 3.3).ln(), 0.0];
-    let (p, cost, it) = levenberg_marquardt(&pts, p0, &values, &h, &clamp, 80)?;
+    let (p, cost, it) = levenberg_marquardt(&pts, p0, &values, None, &h, &clamp, 80)?;
     let shape = smooth_of(&p);
     if !(shape.sigma_mm > 0.1 * dx.max(dy) && shape.sigma_mm <= window_mm && shape.peak.is_finite())
     {
@@ -269,20 +284,40 @@ fn fit_result<S>(
     }
 }
 
+/// Points per parallel task of a fit's evaluations: each point costs tens of nanoseconds, so
+/// finer tasks spend more on scheduling (and idle workers spinning) than they save.
+const CHUNK: usize = 2048;
+
+/// `f` at every point, in order, in parallel over chunks of [`CHUNK`] points.
+fn by_chunks<T: Send>(pts: &[(f64, f64, f64)], f: impl Fn(&(f64, f64, f64)) -> T + Sync) -> Vec<T> {
+    if pts.len() <= CHUNK {
+        return pts.iter().map(f).collect();
+    }
+    pts.par_chunks(CHUNK)
+        .flat_map_iter(|c| c.iter().map(&f))
+        .collect()
+}
+
 fn cost_of(pts: &[(f64, f64, f64)], m: &[f64]) -> f64 {
     pts.iter().zip(m).map(|(q, v)| (q.2 - v).powi(2)).sum()
 }
 
 /// A shape fit as the project's one Levenberg-Marquardt driver sees it: residual
-/// `model - data` at the fit's pixels, forward-difference Jacobian with step `h[k]` for
-/// parameter k, trials clamped to the plausible region by `clamp`.
+/// `model - data` at the fit's pixels, the Jacobian analytic (`gradient`) or else by forward
+/// differences with step `h[k]` for parameter k, trials clamped to the plausible region by
+/// `clamp`.
 struct ShapeProblem<'a> {
     pts: &'a [(f64, f64, f64)],
     /// The model at the points for parameters `p`.
     values: &'a dyn Fn(&[f64]) -> Vec<f64>,
+    /// The model's partial derivatives at the points, one column per parameter.
+    gradient: Option<Gradient<'a>>,
     h: &'a [f64],
     clamp: &'a dyn Fn(&mut [f64]),
 }
+
+/// A fit's analytic Jacobian: the partial derivatives at the points, one column per parameter.
+type Gradient<'a> = &'a dyn Fn(&[f64]) -> Vec<Vec<f64>>;
 
 /// An evaluation: the model at the points and the residual `model - data`.
 struct Trial {
@@ -311,6 +346,9 @@ impl LmProblem for ShapeProblem<'_> {
     }
 
     fn jacobian(&mut self, x: &[f64], state: &Trial) -> Result<Vec<Vec<f64>>, Self::Error> {
+        if let Some(g) = self.gradient {
+            return Ok(g(x));
+        }
         Ok((0..x.len())
             .map(|k| {
                 let mut q = x.to_vec();
@@ -335,12 +373,14 @@ impl LmProblem for ShapeProblem<'_> {
     }
 }
 
-/// A shape fit from `p` by `surface::lm` (see [`ShapeProblem`]): (parameters, cost,
+/// A shape fit from `p` by `surface::lm` (see [`ShapeProblem`]; `gradient` the analytic
+/// Jacobian, forward differences with steps `h` without): (parameters, cost,
 /// iterations), `None` when the parameters are not finite.
 fn levenberg_marquardt(
     pts: &[(f64, f64, f64)],
     p: Vec<f64>,
     values: &dyn Fn(&[f64]) -> Vec<f64>,
+    gradient: Option<Gradient>,
     h: &[f64],
     clamp: &dyn Fn(&mut [f64]),
     max_iter: usize,
@@ -348,6 +388,7 @@ fn levenberg_marquardt(
     let mut prob = ShapeProblem {
         pts,
         values,
+        gradient,
         h,
         clamp,
     };
