@@ -235,9 +235,30 @@ impl Fingerprint {
         }
     }
 
+    /// The slice's length, then its words on [`LANES`] independent streams (word k on lane
+    /// k mod LANES, each lane seeded by its index), folded in lane order, then the words past
+    /// the last whole group: order-sensitive within and across lanes, and the lanes' chains
+    /// of multiplies run side by side instead of one after the other.
     fn slice(&mut self, v: &[f64]) {
+        const LANES: usize = 4;
         self.word(v.len() as u64);
-        for x in v {
+        let mut lanes: [Fingerprint; LANES] = std::array::from_fn(|k| {
+            let mut f = Fingerprint::new();
+            f.word(k as u64);
+            f
+        });
+        let groups = v.chunks_exact(LANES);
+        let rest = groups.remainder();
+        for g in groups {
+            for (lane, x) in lanes.iter_mut().zip(g) {
+                lane.word(x.to_bits());
+            }
+        }
+        for lane in lanes {
+            self.word(lane.0[0]);
+            self.word(lane.0[1]);
+        }
+        for x in rest {
             self.word(x.to_bits());
         }
     }
