@@ -250,6 +250,10 @@ impl Correlator {
 /// pass lies within a stride of the best of all.
 const COARSE_STRIDE: usize = 4;
 
+/// An angle's correlation peak (rows, columns, peak ratio): `None` until evaluated, then the
+/// peak if there is one.
+type Slot = Option<Option<(f64, f64, f64)>>;
+
 /// The angle with the highest correlation peak: (index, peak).
 fn best_of(peaks: &[Option<(f64, f64, f64)>]) -> Option<(usize, (f64, f64, f64))> {
     peaks
@@ -278,16 +282,14 @@ pub fn coarse_registration(
     let step = MAX_ANGLE_DEG.to_radians() / ANGLE_STEPS as f64;
     // Coarse to fine: every COARSE_STRIDE-th angle, then every angle within a stride of the
     // best, then the neighbours of the best if not yet evaluated (for the parabola).
-    let mut peaks: Vec<Option<Option<(f64, f64, f64)>>> = vec![None; 2 * ANGLE_STEPS + 1];
-    let mut eval = |k: usize, peaks: &mut Vec<Option<Option<(f64, f64, f64)>>>| {
+    let mut peaks: Vec<Slot> = vec![None; 2 * ANGLE_STEPS + 1];
+    let eval = |k: usize, peaks: &mut [Slot]| {
         if k < peaks.len() && peaks[k].is_none() {
             let th = (k as f64 - ANGLE_STEPS as f64) * step;
             peaks[k] = Some(corr.peak(&rotate(&a, th, aspect)));
         }
     };
-    let best = |peaks: &[Option<Option<(f64, f64, f64)>>]| {
-        best_of(&peaks.iter().map(|p| p.flatten()).collect::<Vec<_>>())
-    };
+    let best = |peaks: &[Slot]| best_of(&peaks.iter().map(|p| p.flatten()).collect::<Vec<_>>());
     for k in (0..=2 * ANGLE_STEPS).step_by(COARSE_STRIDE) {
         eval(k, &mut peaks);
     }
