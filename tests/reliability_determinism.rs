@@ -59,3 +59,56 @@ fn psd_json_is_byte_identical_across_runs() {
     assert_eq!(a, b, "two runs differ");
     assert_eq!(a, one, "one thread differs from many");
 }
+
+/// The calibration evaluates candidates side by side and keeps several forward-model
+/// workspaces per channel; its JSON must still be the same bytes on every run and thread count.
+/// A path wiggle (every candidate column then walks a perturbed path, with line phases that
+/// build new kernels) and a wider spot (the scale scan, one forward model per scale).
+#[test]
+fn calibrate_json_is_byte_identical_across_runs_and_thread_counts() {
+    use bonnetlab::calibrate::synth::write::write_run;
+    use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig, Waveform, WiggleCoord};
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = SynthConfig {
+        seed: 15,
+        effects: vec![
+            Injected::PeriodicPathError {
+                axis_x: false,
+                amplitude_mm: 0.3,
+                period_mm: 12.0,
+                phase_rad: 0.5,
+                coord: WiggleCoord::X,
+                waveform: Waveform::Sine,
+            },
+            Injected::TifScale { scale: 1.1 },
+        ],
+        ..SynthConfig::default()
+    };
+    let recipe = write_run(dir.path(), &generate(&cfg).unwrap()).unwrap();
+    let r = recipe.to_str().unwrap();
+    let json = |name: &str, threads: Option<&str>| -> Vec<u8> {
+        let out = dir.path().join(name);
+        run(&["calibrate", r, "--json", out.to_str().unwrap()], threads);
+        std::fs::read(&out).unwrap()
+    };
+    let a = json("a.json", None);
+    let v: serde_json::Value = serde_json::from_slice(&a).unwrap();
+    let kinds: Vec<&str> = v["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|e| e["kind"].as_str())
+        .collect();
+    assert!(kinds.contains(&"periodic_path_error"), "{kinds:?}");
+    assert_eq!(a, json("b.json", None), "two runs differ");
+    assert_eq!(
+        a,
+        json("one.json", Some("1")),
+        "one thread differs from many"
+    );
+    assert_eq!(
+        a,
+        json("four.json", Some("4")),
+        "four threads differ from two"
+    );
+}

@@ -151,7 +151,7 @@ fn main() {
                     })
                     .collect();
                 println!(
-                    "| {name} | {} | {} | {:.4} | {:.4} | {:.2} | {wall:.1} | {cpu} |",
+                    "| {name} | {} | {} | {:.4} | {:.4} | {:.2} | {wall:.2} | {cpu} |",
                     cfg.seed,
                     if acc.is_empty() {
                         "none".to_string()
@@ -164,7 +164,7 @@ fn main() {
                 );
             }
             Err(e) => println!(
-                "| {name} | {} | calibration failed: {e} | | | | {wall:.1} | {cpu} |",
+                "| {name} | {} | calibration failed: {e} | | | | {wall:.2} | {cpu} |",
                 cfg.seed
             ),
         }

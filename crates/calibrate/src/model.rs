@@ -143,8 +143,9 @@ impl Covariates {
     }
 }
 
-/// The forward model's channels at one TIF scale (shared; one caller at a time).
-pub type Kernels = Mutex<Channels>;
+/// The forward model's channels at one TIF scale (shared: each channel's workspace takes one
+/// caller at a time, so requests through different channels run side by side).
+pub type Kernels = Channels;
 
 /// The data of a run, prepared once.
 pub struct Problem {
@@ -368,10 +369,7 @@ impl Problem {
     pub fn kernels(&self, scale: f64) -> Result<Arc<Kernels>, CalibrateError> {
         let scale = scale.clamp(0.5, MAX_SCALE);
         if let Ok(mut cache) = self.kernels.lock() {
-            if let Some(n) = cache
-                .iter()
-                .position(|k| k.lock().is_ok_and(|c| c.scale() == scale))
-            {
+            if let Some(n) = cache.iter().position(|k| k.scale() == scale) {
                 // Most recently used last: the scan of `tif_scale` builds a set per scale and
                 // must not push out the scale the model sits at.
                 let k = cache.remove(n);
@@ -379,11 +377,7 @@ impl Problem {
                 return Ok(k);
             }
         }
-        let set = Arc::new(Mutex::new(Channels::new(
-            self.tif.field(),
-            &self.grid,
-            scale,
-        )?));
+        let set = Arc::new(Channels::new(self.tif.field(), &self.grid, scale)?);
         if let Ok(mut cache) = self.kernels.lock() {
             if cache.len() >= self.max_kernel_sets() {
                 cache.remove(0);
@@ -421,18 +415,14 @@ impl Problem {
         exec: &PathLog,
         terms: &[(Channel, Option<&[f64]>)],
     ) -> Result<Vec<f64>, CalibrateError> {
-        let mut c = k
-            .lock()
-            .map_err(|_| CalibrateError::Processing("forward model poisoned".into()))?;
-        let key = fingerprint(c.scale(), exec, terms);
+        let key = fingerprint(k.scale(), exec, terms);
         if let Some(hit) = self.columns.lock().ok().and_then(|m| m.get(key)) {
             return Ok(hit.as_ref().clone());
         }
         let col = match terms {
-            [(ch, g)] => self.compress(&c.removal(*ch, exec, *g)?),
-            _ => self.compress(&c.removal_sum(exec, terms)?),
+            [(ch, g)] => self.compress(&k.removal(*ch, exec, *g)?),
+            _ => self.compress(&k.removal_sum(exec, terms)?),
         };
-        drop(c);
         if let Ok(mut m) = self.columns.lock() {
             m.put(key, Arc::new(col.clone()));
         }

@@ -6,6 +6,8 @@
 
 use bonnetlab_surface::lm::{self, LmProblem, LmSettings};
 
+use rayon::prelude::*;
+
 use crate::error::CalibrateError;
 use crate::model::{evaluate, fit, Effect, Eval, Fit, Problem};
 
@@ -39,7 +41,6 @@ pub fn jacobian(
     profiled: bool,
 ) -> Result<Vec<Vec<f64>>, CalibrateError> {
     let (theta, steps) = nl_vec(effects);
-    let mut cols = Vec::with_capacity(theta.len());
     // Registration parameters: analytic columns from the smoothed after map (see
     // `effects::registration`), profiled by projecting out the linear columns.
     let mut analytic: Vec<Option<Vec<f64>>> = vec![None; theta.len()];
@@ -56,42 +57,65 @@ pub fn jacobian(
         }
         k += n;
     }
-    for i in 0..theta.len() {
-        if let Some(c) = analytic[i].take() {
-            cols.push(c);
-            continue;
-        }
-        let mut t = theta.clone();
-        t[i] += steps[i];
-        let mut trial: Vec<Box<dyn Effect>> = effects.to_vec();
-        set_nl(&mut trial, &t);
-        let ev = evaluate(p, &trial, Some(ev0))?;
-        let r = if profiled {
-            fit(&ev, &[])?.resid
-        } else {
-            // Residual at the same linear coefficients.
-            let mut r = ev.m.clone();
-            for (k, ri) in r.iter_mut().enumerate() {
-                if ev.w[k] == 0.0 {
-                    *ri = 0.0;
-                    continue;
-                }
-                for (c, col) in f0.coef.iter().zip(&ev.cols) {
-                    *ri -= c * col[k];
-                }
+    // The numeric columns side by side (each its own evaluation), kept in parameter order.
+    let numeric: Vec<Result<Option<Vec<f64>>, CalibrateError>> = (0..theta.len())
+        .into_par_iter()
+        .map(|i| {
+            if analytic[i].is_some() {
+                return Ok(None);
             }
-            r
-        };
-        cols.push(
-            // Pixels whose validity changes with the step carry no derivative information.
-            r.iter()
-                .zip(&f0.resid)
-                .zip(ev.w.iter().zip(&ev0.w))
-                .map(|((a, b), (w1, w0))| if w1 == w0 { (a - b) / steps[i] } else { 0.0 })
-                .collect(),
-        );
+            numeric_column(p, effects, ev0, f0, profiled, &theta, &steps, i).map(Some)
+        })
+        .collect();
+    let mut cols = Vec::with_capacity(theta.len());
+    for (a, n) in analytic.into_iter().zip(numeric) {
+        let c = a.or(n?).ok_or_else(|| {
+            CalibrateError::Processing("a Jacobian column was neither analytic nor numeric".into())
+        })?;
+        cols.push(c);
     }
     Ok(cols)
+}
+
+/// Column `i` of the Jacobian by a forward difference of the residual.
+#[allow(clippy::too_many_arguments)]
+fn numeric_column(
+    p: &Problem,
+    effects: &[Box<dyn Effect>],
+    ev0: &Eval,
+    f0: &Fit,
+    profiled: bool,
+    theta: &[f64],
+    steps: &[f64],
+    i: usize,
+) -> Result<Vec<f64>, CalibrateError> {
+    let mut t = theta.to_vec();
+    t[i] += steps[i];
+    let mut trial: Vec<Box<dyn Effect>> = effects.to_vec();
+    set_nl(&mut trial, &t);
+    let ev = evaluate(p, &trial, Some(ev0))?;
+    let r = if profiled {
+        fit(&ev, &[])?.resid
+    } else {
+        // Residual at the same linear coefficients.
+        let mut r = ev.m.clone();
+        for (k, ri) in r.iter_mut().enumerate() {
+            if ev.w[k] == 0.0 {
+                *ri = 0.0;
+                continue;
+            }
+            for (c, col) in f0.coef.iter().zip(&ev.cols) {
+                *ri -= c * col[k];
+            }
+        }
+        r
+    };
+    // Pixels whose validity changes with the step carry no derivative information.
+    Ok(r.iter()
+        .zip(&f0.resid)
+        .zip(ev.w.iter().zip(&ev0.w))
+        .map(|((a, b), (w1, w0))| if w1 == w0 { (a - b) / steps[i] } else { 0.0 })
+        .collect())
 }
 
 /// `c` minus its weighted least-squares fit by the evaluation's linear columns.

@@ -372,6 +372,10 @@ fn settle(rms_before: f64, rms_after: &[f64], noise_rms: f64) -> usize {
     }
 }
 
+/// Share of the excess residual over the noise floor (sum of squares) that another kind's
+/// held-out reduction must reach for the round to skip the TIF-scale scan.
+const SCAN_SKIP_SHARE: f64 = 0.8;
+
 /// Runs the whole calibration on a prepared problem.
 pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateError> {
     let mut effects: Vec<Box<dyn Effect>> = Vec::new();
@@ -470,6 +474,35 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                 fallback::passes(s, c.extra.len())
             })
             .unzip();
+        let (mut cands, mut scores): (Vec<Candidate>, Vec<Score>) = (cands, scores);
+        // The scan of the TIF scale (`tif_scale::scanned`) costs a forward model per scale
+        // scanned. It is skipped while another kind's candidate takes at least
+        // SCAN_SKIP_SHARE of the excess over the noise floor on held-out data: no widening
+        // could take more than the rest this round, and the next round looks again.
+        if let Some(ti) = cands.iter().position(|c| c.kind == "tif_scale") {
+            let excess = f.rss - f.n * noise * noise;
+            let other_top = cands
+                .iter()
+                .zip(&scores)
+                .enumerate()
+                .filter(|&(i, (_, s))| i != ti && s.significant())
+                .map(|(_, (_, s))| s.delta)
+                .fold(0.0, f64::max);
+            let explained = excess > 0.0 && other_top >= SCAN_SKIP_SHARE * excess;
+            if trace {
+                eprintln!(
+                    "tif_scale scan: best other candidate takes {:.2} of the excess{}",
+                    other_top / excess.max(1e-300),
+                    if explained { " (skipped)" } else { "" }
+                );
+            }
+            if !explained {
+                if let Some(c) = crate::effects::tif_scale::scanned(&cur) {
+                    scores[ti] = holdout(&ev, &c.extra, &sp, &bg);
+                    cands[ti] = c;
+                }
+            }
+        }
         let mut round = Round {
             accepted: None,
             rejected: Vec::new(),
@@ -490,13 +523,23 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         }
         let rms_before = f.rms();
         let mut refined = Vec::with_capacity(contenders.len());
-        for &ci in &contenders {
+        // The contenders are refined side by side, then taken in preference order.
+        type Refined = (Vec<Box<dyn Effect>>, Eval, Fit);
+        let all: Vec<Result<Refined, CalibrateError>> = contenders
+            .par_iter()
+            .map(|&ci| {
+                let cand = &cands[ci];
+                let fc = fit(&ev, &cand.extra)?;
+                let nb = ev.cols.len();
+                let mut trial = effects.clone();
+                trial.push((cand.make)(&fc.coef[nb..], fc.coef[0]));
+                let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
+                Ok((trial, ev_t, f_t))
+            })
+            .collect();
+        for (&ci, r) in contenders.iter().zip(all) {
             let cand = &cands[ci];
-            let fc = fit(&ev, &cand.extra)?;
-            let nb = ev.cols.len();
-            let mut trial = effects.clone();
-            trial.push((cand.make)(&fc.coef[nb..], fc.coef[0]));
-            let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
+            let (trial, ev_t, f_t) = r?;
             if trace {
                 eprintln!(
                     "[{:?}] refined after {}: {:.4} nm",

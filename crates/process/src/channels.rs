@@ -7,7 +7,7 @@
 //! built here has the same motion kernels, line phases and splatting as the removal `simulate`
 //! predicts; nothing is sampled or convolved a second way. Workspaces are built on first use.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, MutexGuard};
 
 use ndarray::{s, Array2};
 
@@ -16,7 +16,7 @@ use crate::fft::Convolver;
 use crate::grid::Grid;
 use crate::interp::bilinear;
 use crate::path::PathLog;
-use crate::removal::FastRemoval;
+use crate::removal::{FastRemoval, SharedSpectra};
 use crate::tif::derived::{Channel, Derived};
 use crate::tif::{RateField, Tif};
 
@@ -31,14 +31,35 @@ fn slot(c: Channel) -> usize {
     }
 }
 
-/// Removal workspaces of the channels of one TIF at one widening on one grid.
+/// Removal workspaces of the channels of one TIF at one widening on one grid. Callers may share
+/// it across threads: each channel keeps a small pool of workspaces, so calls run side by side
+/// (on a grid small enough that its transforms run on one thread; on a larger one a channel has
+/// one workspace, whose transforms use every thread). A removal's bits do not depend on which
+/// workspace made it, or on what that workspace made before ([`FastRemoval::removal`]).
 pub struct Channels {
     base: Arc<dyn RateField + Send>,
     grid: Grid,
     scale: f64,
     step_mm: f64,
-    fast: [Option<FastRemoval>; 4],
-    adjoint: [Option<Adjoint>; 4],
+    fast: [Pool; 4],
+    /// Idle matched-filter convolvers per channel (taken like the workspaces).
+    adjoint: [Mutex<Vec<Adjoint>>; 4],
+}
+
+/// A channel's workspaces: the idle ones and how many to keep.
+#[derive(Default)]
+struct Pool {
+    state: Mutex<PoolState>,
+    /// The kernels its workspaces built, for the others.
+    spectra: SharedSpectra,
+}
+
+#[derive(Default)]
+struct PoolState {
+    idle: Vec<FastRemoval>,
+    /// Most idle workspaces kept (set when the first is built: 1 where its transforms run in
+    /// parallel, else the number of threads).
+    keep: usize,
 }
 
 /// Correlation of a map with a channel's point-sampled kernel, on the grown grid.
@@ -66,16 +87,16 @@ impl Channels {
                 "TIF scale must be positive, got {scale}"
             )));
         }
-        let mut c = Channels {
+        let c = Channels {
             base,
             grid: *grid,
             scale,
             // A tenth of a pixel: the kernels sample the derivative, not a pixel difference.
             step_mm: 0.1 * grid.dx_mm.min(grid.dy_mm),
-            fast: [None, None, None, None],
-            adjoint: [None, None, None, None],
+            fast: Default::default(),
+            adjoint: Default::default(),
         };
-        c.workspace(Channel::Value)?;
+        drop(c.workspace(Channel::Value)?);
         Ok(c)
     }
 
@@ -92,28 +113,42 @@ impl Channels {
         Derived::new(self.base.clone(), self.scale, ch, step)
     }
 
-    fn workspace(&mut self, ch: Channel) -> Result<&mut FastRemoval, ProcessError> {
-        let k = slot(ch);
-        if self.fast[k].is_none() {
-            self.fast[k] = Some(FastRemoval::from_field(&self.field(ch), &self.grid)?);
+    /// A workspace of the channel, for this caller alone until it is dropped: an idle one,
+    /// else a new one. A caller never waits for another's: a thread that holds a workspace
+    /// while its transforms run in parallel may take up another task of the same calibration
+    /// that asks for one (waiting would then wait for itself).
+    fn workspace(&self, ch: Channel) -> Result<Workspace<'_>, ProcessError> {
+        let pool = &self.fast[slot(ch)];
+        if let Some(w) = lock(&pool.state)?.idle.pop() {
+            return Ok(Workspace { pool, w: Some(w) });
         }
-        Ok(self.fast[k].as_mut().expect("built above"))
+        let mut w = FastRemoval::from_field(&self.field(ch), &self.grid)?;
+        w.share_spectra(pool.spectra.clone());
+        let mut st = lock(&pool.state)?;
+        if st.keep == 0 {
+            st.keep = if w.runs_parallel() {
+                1
+            } else {
+                rayon::current_num_threads().clamp(1, MAX_WORKSPACES)
+            };
+        }
+        Ok(Workspace { pool, w: Some(w) })
     }
 
     /// Removal (nm, or nm per unit of the channel's variable) on the grid of `path` with
     /// optional per-sample rate weights, through channel `ch`.
     pub fn removal(
-        &mut self,
+        &self,
         ch: Channel,
         path: &PathLog,
         weights: Option<&[f64]>,
     ) -> Result<Array2<f64>, ProcessError> {
-        self.workspace(ch)?.removal(path, weights)
+        self.workspace(ch)?.get().removal(path, weights)
     }
 
     /// Sum of several channels' removals of the same path, each with its own weights.
     pub fn removal_sum(
-        &mut self,
+        &self,
         path: &PathLog,
         terms: &[(Channel, Option<&[f64]>)],
     ) -> Result<Array2<f64>, ProcessError> {
@@ -130,7 +165,7 @@ impl Channels {
     /// adjoint of resting dwell at the samples, the projection of `r` on a unit rate (or
     /// displacement) impulse there.
     pub fn matched(
-        &mut self,
+        &self,
         ch: Channel,
         r: &Array2<f64>,
         path: &PathLog,
@@ -140,38 +175,80 @@ impl Channels {
                 "matched filter map does not match the grid",
             ));
         }
-        let k = slot(ch);
-        if self.adjoint[k].is_none() {
-            let ext = *self.workspace(Channel::Value)?.dwell_grid();
-            let kern = Tif::sample(&self.field(ch), self.grid.dx_mm, self.grid.dy_mm)?;
-            let offset = (
-                ((self.grid.y0_mm - ext.y0_mm) / ext.dy_mm).round() as usize,
-                ((self.grid.x0_mm - ext.x0_mm) / ext.dx_mm).round() as usize,
-            );
-            let conv = Convolver::new(ext.rows, ext.cols, kern.rate_nm_per_s.view());
-            self.adjoint[k] = Some(Adjoint { conv, ext, offset });
-        }
-        let a = self.adjoint[k].as_mut().expect("built above");
+        let idle = lock(&self.adjoint[slot(ch)])?.pop();
+        let mut a = match idle {
+            Some(a) => a,
+            None => {
+                let ext = *self.workspace(Channel::Value)?.get().dwell_grid();
+                let kern = Tif::sample(&self.field(ch), self.grid.dx_mm, self.grid.dy_mm)?;
+                let offset = (
+                    ((self.grid.y0_mm - ext.y0_mm) / ext.dy_mm).round() as usize,
+                    ((self.grid.x0_mm - ext.x0_mm) / ext.dx_mm).round() as usize,
+                );
+                let conv = Convolver::new(ext.rows, ext.cols, kern.rate_nm_per_s.view());
+                Adjoint { conv, ext, offset }
+            }
+        };
         let mut big = Array2::zeros((a.ext.rows, a.ext.cols));
         let (o0, o1) = a.offset;
         big.slice_mut(s![o0..o0 + r.nrows(), o1..o1 + r.ncols()])
             .assign(r);
         let c = a.conv.apply_adjoint(big.view());
-        Ok((0..path.len())
+        let h = (0..path.len())
             .map(|i| {
                 let (u, v) = a.ext.frac_index(path.x_mm[i], path.y_mm[i]);
                 bilinear(&c, u, v)
             })
-            .collect())
+            .collect();
+        let mut idle = lock(&self.adjoint[slot(ch)])?;
+        if idle.len() < MAX_WORKSPACES {
+            idle.push(a);
+        }
+        Ok(h)
     }
 
     /// Builds every channel's workspace now (so later calls do not pay for it).
-    pub fn build_all(&mut self) -> Result<(), ProcessError> {
+    pub fn build_all(&self) -> Result<(), ProcessError> {
         for ch in CHANNELS {
             self.workspace(ch)?;
         }
         Ok(())
     }
+}
+
+/// Most idle workspaces a channel keeps on a grid whose transforms run on one thread.
+const MAX_WORKSPACES: usize = 4;
+
+/// A channel's workspace, lent to one caller; back to its pool when dropped.
+struct Workspace<'a> {
+    pool: &'a Pool,
+    w: Option<FastRemoval>,
+}
+
+impl Workspace<'_> {
+    fn get(&mut self) -> &mut FastRemoval {
+        self.w
+            .as_mut()
+            .expect("a workspace is lent until it is dropped")
+    }
+}
+
+impl Drop for Workspace<'_> {
+    fn drop(&mut self) {
+        if let (Some(w), Ok(mut st)) = (self.w.take(), self.pool.state.lock()) {
+            if st.idle.len() < st.keep.max(1) {
+                st.idle.push(w);
+            }
+        }
+    }
+}
+
+fn poisoned() -> ProcessError {
+    ProcessError::Processing("a forward-model workspace was poisoned by a panic".into())
+}
+
+fn lock<T>(m: &Mutex<T>) -> Result<MutexGuard<'_, T>, ProcessError> {
+    m.lock().map_err(|_| poisoned())
 }
 
 #[cfg(test)]
@@ -206,7 +283,7 @@ mod tests {
     #[test]
     fn derivative_channels_are_the_removal_of_a_displaced_path() {
         let (g, grid, path) = setup();
-        let mut c = Channels::new(g, &grid, 1.0).unwrap();
+        let c = Channels::new(g, &grid, 1.0).unwrap();
         let e = 0.01;
         let shift = |dx: f64, dy: f64| {
             PathLog::new(
@@ -232,7 +309,7 @@ mod tests {
         }
         // Widening: R(s + ds) - R(s) ~ ds dR/ds.
         let ds = 1e-3;
-        let mut c2 = Channels::new(c.base.clone(), &grid, 1.0 + ds).unwrap();
+        let c2 = Channels::new(c.base.clone(), &grid, 1.0 + ds).unwrap();
         let r1 = c2.removal(Channel::Value, &path, None).unwrap();
         let d = c.removal(Channel::Ds, &path, None).unwrap();
         let worst = r1
@@ -245,9 +322,107 @@ mod tests {
     }
 
     #[test]
+    fn removals_from_several_threads_are_the_bits_of_one_workspace_in_order() {
+        // Paths shifted by sub-pixel amounts (each with line phases of its own, so the
+        // workspaces build and replace phase kernels in whatever order the threads reach
+        // them), with and without rate weights, through every channel.
+        let (g, grid, path) = setup();
+        let shifted: Vec<PathLog> = (0..24)
+            .map(|k| {
+                let d = 0.013 * k as f64;
+                PathLog::new(
+                    path.t_s.clone(),
+                    path.x_mm.iter().map(|v| v + 0.7 * d).collect(),
+                    path.y_mm.iter().map(|v| v + d).collect(),
+                )
+                .unwrap()
+            })
+            .collect();
+        let w: Vec<f64> = (0..path.len())
+            .map(|k| 1.0 + 0.3 * (k as f64 * 0.1).sin())
+            .collect();
+        let jobs: Vec<(usize, Channel, bool)> = (0..shifted.len())
+            .flat_map(|k| {
+                CHANNELS
+                    .into_iter()
+                    .flat_map(move |c| [(k, c, false), (k, c, true)])
+            })
+            .collect();
+        let one = |c: &Channels, &(k, ch, weighted): &(usize, Channel, bool)| {
+            c.removal(ch, &shifted[k], weighted.then_some(w.as_slice()))
+                .unwrap()
+        };
+        let alone = Channels::new(g.clone(), &grid, 1.0).unwrap();
+        let want: Vec<Array2<f64>> = jobs.iter().map(|j| one(&alone, j)).collect();
+        let shared = Channels::new(g, &grid, 1.0).unwrap();
+        let got: Vec<Array2<f64>> = std::thread::scope(|s| {
+            let hs: Vec<_> = (0..3)
+                .map(|t| {
+                    let (shared, jobs, one) = (&shared, &jobs, &one);
+                    // Each thread takes the jobs in its own order.
+                    s.spawn(move || {
+                        let mut order: Vec<usize> = (0..jobs.len()).collect();
+                        order.rotate_left(t * jobs.len() / 3);
+                        if t == 1 {
+                            order.reverse();
+                        }
+                        order
+                            .into_iter()
+                            .map(|i| (i, one(shared, &jobs[i])))
+                            .collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            let mut all: Vec<Option<Array2<f64>>> = vec![None; jobs.len()];
+            for h in hs {
+                for (i, a) in h.join().unwrap() {
+                    if let Some(prev) = &all[i] {
+                        assert!(prev
+                            .iter()
+                            .zip(a.iter())
+                            .all(|(x, y)| x.to_bits() == y.to_bits()));
+                    }
+                    all[i] = Some(a);
+                }
+            }
+            all.into_iter().map(|a| a.unwrap()).collect()
+        });
+        for (j, (a, b)) in jobs.iter().zip(want.iter().zip(&got)) {
+            assert!(
+                a.iter()
+                    .zip(b.iter())
+                    .all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{j:?} differs from the one-workspace result"
+            );
+        }
+    }
+
+    #[test]
+    fn a_caller_holding_a_workspace_gets_another_without_waiting() {
+        // A rayon thread that holds a workspace while its transforms run in parallel may take
+        // up another task asking for the same channel; that task must get a workspace of its
+        // own (waiting for the held one would wait for itself). Run on another thread so a
+        // regression shows as a failure, not a hang.
+        let (g, grid, path) = setup();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let c = Channels::new(g, &grid, 1.0).unwrap();
+            let held = c.workspace(Channel::Value).unwrap();
+            let inner = c.removal(Channel::Value, &path, None).unwrap();
+            drop(held);
+            let after = c.removal(Channel::Value, &path, None).unwrap();
+            tx.send(inner == after).unwrap();
+        });
+        let same = rx
+            .recv_timeout(std::time::Duration::from_secs(120))
+            .expect("a nested request for a workspace must not wait for the held one");
+        assert!(same);
+    }
+
+    #[test]
     fn matched_filter_is_the_adjoint_of_resting_dwell() {
         let (g, grid, _) = setup();
-        let mut c = Channels::new(g.clone(), &grid, 1.0).unwrap();
+        let c = Channels::new(g.clone(), &grid, 1.0).unwrap();
         // A tool resting at pixel centres: <R(dwell), r> = sum_k dwell_k h_k.
         let pts = [(5.0, 5.0), (10.25, 7.5), (3.0, 12.0)];
         let r = Array2::from_shape_fn((60, 70), |(i, j)| ((i * 7 + j * 3) % 11) as f64 - 5.0);

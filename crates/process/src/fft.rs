@@ -522,7 +522,7 @@ pub struct MultiConvolver {
     fft: Fft2,
     rows: usize,
     cols: usize,
-    kernel_hats: Vec<Vec<Complex<f64>>>,
+    kernel_hats: Vec<Arc<Vec<Complex<f64>>>>,
     real: Vec<f64>,
     tmp: Vec<Complex<f64>>,
     spec: Vec<Complex<f64>>,
@@ -562,7 +562,7 @@ impl MultiConvolver {
         let mut tmp = zeroed_dense(len);
         let kernel_hats = kernels
             .iter()
-            .map(|k| kernel_hat_with(&fft, k.view(), &mut real, &mut tmp))
+            .map(|k| Arc::new(kernel_hat_with(&fft, k.view(), &mut real, &mut tmp)))
             .collect();
         MultiConvolver {
             fft,
@@ -586,14 +586,47 @@ impl MultiConvolver {
 
     /// Adds a kernel (one forward transform); returns its index for [`Self::apply_sum`].
     pub fn push_kernel(&mut self, kernel: ArrayView2<f64>) -> usize {
-        let hat = kernel_hat_with(&self.fft, kernel, &mut self.real, &mut self.tmp);
-        self.kernel_hats.push(hat);
-        self.kernel_hats.len() - 1
+        let hat = self.kernel_spectrum(kernel);
+        self.push_kernel_spectrum(hat)
     }
 
     /// Replaces kernel `idx` (one forward transform).
     pub fn set_kernel(&mut self, idx: usize, kernel: ArrayView2<f64>) {
-        self.kernel_hats[idx] = kernel_hat_with(&self.fft, kernel, &mut self.real, &mut self.tmp);
+        self.kernel_hats[idx] = self.kernel_spectrum(kernel);
+    }
+
+    /// The spectrum of a kernel at this convolver's transform size (one forward transform), to
+    /// hand to [`Self::push_kernel_spectrum`] or [`Self::set_kernel_spectrum`] of a convolver
+    /// of the same transform size.
+    pub fn kernel_spectrum(&mut self, kernel: ArrayView2<f64>) -> Arc<Vec<Complex<f64>>> {
+        Arc::new(kernel_hat_with(
+            &self.fft,
+            kernel,
+            &mut self.real,
+            &mut self.tmp,
+        ))
+    }
+
+    /// Adds a kernel by its spectrum ([`Self::kernel_spectrum`], no transform); returns its
+    /// index.
+    pub fn push_kernel_spectrum(&mut self, hat: Arc<Vec<Complex<f64>>>) -> usize {
+        assert_eq!(
+            hat.len(),
+            self.fft.spectrum_len(),
+            "kernel spectrum of another size"
+        );
+        self.kernel_hats.push(hat);
+        self.kernel_hats.len() - 1
+    }
+
+    /// Replaces kernel `idx` by a spectrum ([`Self::kernel_spectrum`], no transform).
+    pub fn set_kernel_spectrum(&mut self, idx: usize, hat: Arc<Vec<Complex<f64>>>) {
+        assert_eq!(
+            hat.len(),
+            self.fft.spectrum_len(),
+            "kernel spectrum of another size"
+        );
+        self.kernel_hats[idx] = hat;
     }
 
     /// Keeps only the first `n` kernels (drops cached ones).
@@ -625,6 +658,24 @@ impl MultiConvolver {
         origin: (usize, usize),
         shape: (usize, usize),
     ) -> Array2<f64> {
+        let ordered: Vec<(usize, ArrayView2<f64>)> = inputs
+            .iter()
+            .enumerate()
+            .filter_map(|(k, v)| v.map(|v| (k, v)))
+            .collect();
+        self.apply_sum_window_ordered(&ordered, origin, shape)
+    }
+
+    /// [`MultiConvolver::apply_sum_window`] with the inputs given as (kernel index, input)
+    /// pairs, summed in the order given (an index may appear more than once). The result
+    /// depends on that order only, not on where the kernels sit: a caller that lists its
+    /// inputs in an order of its own gets the same bits whichever slots its kernels took.
+    pub fn apply_sum_window_ordered(
+        &mut self,
+        inputs: &[(usize, ArrayView2<f64>)],
+        origin: (usize, usize),
+        shape: (usize, usize),
+    ) -> Array2<f64> {
         let (r0, c0) = origin;
         assert!(
             r0 + shape.0 <= self.rows && c0 + shape.1 <= self.cols,
@@ -633,8 +684,8 @@ impl MultiConvolver {
         let n1 = self.fft.shape().1;
         let parallel = self.fft.is_parallel();
         let mut any = false;
-        for (input, kh) in inputs.iter().zip(&self.kernel_hats) {
-            let Some(input) = input else { continue };
+        for (k, input) in inputs {
+            let kh = &self.kernel_hats[*k];
             let view = input.slice(ndarray::s![
                 ..self.rows.min(input.nrows()),
                 ..self.cols.min(input.ncols())

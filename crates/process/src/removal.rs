@@ -18,6 +18,8 @@
 use ndarray::{Array2, ArrayView2};
 
 use crate::error::ProcessError;
+use std::sync::{Arc, Mutex};
+
 use crate::fft::{fast_len, Complex, Convolver, MultiConvolver};
 use crate::grid::Grid;
 use crate::path::PathLog;
@@ -439,8 +441,11 @@ const MIN_CACHED_PHASES: usize = 2 * PHASE_NODES;
 const MAX_CACHED_PHASES: usize = 48;
 const PHASE_CACHE_BYTES: usize = 16 << 20;
 /// Zeroed dwell maps kept for reuse between calls (fresh grown-grid maps cost page faults and
-/// a memset per call).
-const MAX_POOLED_MAPS: usize = 8;
+/// a memset per call): as many as a removal takes (the centred kernels' three and the phase
+/// nodes of both motions), within [`POOLED_MAP_BYTES`] and at least [`MIN_POOLED_MAPS`].
+const MAX_POOLED_MAPS: usize = 3 + 2 * PHASE_NODES + 2;
+const MIN_POOLED_MAPS: usize = 8;
+const POOLED_MAP_BYTES: usize = 48 << 20;
 
 /// One sub-step of the path on the grown grid: fractional row / column, dwell (s, times the
 /// rate weight), the path's own dwell (s) and its shares `[resting, along X, along Y]`.
@@ -504,6 +509,46 @@ pub struct FastRemoval {
     walk_phases: [Lines; 2],
     /// Zeroed dwell maps of the grown grid, for reuse.
     pool: Vec<Array2<f64>>,
+    /// Kernel spectra shared with the other workspaces of the same field and grid, if any.
+    shared: Option<SharedSpectra>,
+}
+
+/// Kernel spectra shared by workspaces of one field on one grid (the pool of a channel, see
+/// [`crate::channels::Channels`]), by kernel key: a kernel one of them built is handed to the
+/// others instead of being built again. The spectra are the same whichever workspace built
+/// them; at most [`SHARED_SPECTRA`] are kept, the oldest dropped first.
+#[derive(Debug, Default, Clone)]
+pub struct SharedSpectra(Arc<Mutex<SpectraCache>>);
+
+#[derive(Debug, Default)]
+struct SpectraCache {
+    map: std::collections::HashMap<(usize, u32), Arc<Vec<Complex<f64>>>>,
+    order: std::collections::VecDeque<(usize, u32)>,
+}
+
+/// Most spectra a [`SharedSpectra`] keeps (a workspace's own cache holds up to
+/// [`MAX_CACHED_PHASES`] phases and the three centred kernels).
+const SHARED_SPECTRA: usize = MAX_CACHED_PHASES + 3;
+
+impl SharedSpectra {
+    fn get(&self, key: (usize, u32)) -> Option<Arc<Vec<Complex<f64>>>> {
+        self.0.lock().ok()?.map.get(&key).cloned()
+    }
+
+    fn put(&self, key: (usize, u32), hat: &Arc<Vec<Complex<f64>>>) {
+        let Ok(mut c) = self.0.lock() else { return };
+        if c.map.contains_key(&key) {
+            return;
+        }
+        while c.map.len() >= SHARED_SPECTRA {
+            let Some(old) = c.order.pop_front() else {
+                break;
+            };
+            c.map.remove(&old);
+        }
+        c.map.insert(key, hat.clone());
+        c.order.push_back(key);
+    }
 }
 
 impl std::fmt::Debug for FastRemoval {
@@ -570,7 +615,37 @@ impl FastRemoval {
             walk_at: Vec::new(),
             walk_phases: [Lines::Spread, Lines::Spread],
             pool: Vec::new(),
+            shared: None,
         })
+    }
+
+    /// Shares kernel spectra with other workspaces of the same field on the same grid (each
+    /// kernel is then built by one of them only).
+    pub fn share_spectra(&mut self, shared: SharedSpectra) {
+        self.shared = Some(shared);
+    }
+
+    /// The spectrum of kernel `key`: from the shared spectra, else built by `build` (and
+    /// shared).
+    fn spectrum(
+        &mut self,
+        key: (usize, u32),
+        build: impl FnOnce(&dyn RateField, f64, f64, (usize, usize)) -> Result<Tif, ProcessError>,
+    ) -> Result<Arc<Vec<Complex<f64>>>, ProcessError> {
+        if let Some(hat) = self.shared.as_ref().and_then(|sh| sh.get(key)) {
+            return Ok(hat);
+        }
+        let t = build(
+            self.field.as_ref(),
+            self.grid.dx_mm,
+            self.grid.dy_mm,
+            self.half,
+        )?;
+        let hat = self.conv.kernel_spectrum(t.rate_nm_per_s.view());
+        if let Some(sh) = &self.shared {
+            sh.put(key, &hat);
+        }
+        Ok(hat)
     }
 
     /// Line-phase kernels built so far (each one a field sampling and a forward transform; a
@@ -582,6 +657,11 @@ impl FastRemoval {
     /// The map grid grown by the largest kernel half-width: where dwell can affect the map.
     pub fn dwell_grid(&self) -> &Grid {
         &self.ext
+    }
+
+    /// Whether this workspace's transforms run on several threads (a large grid).
+    pub fn runs_parallel(&self) -> bool {
+        self.conv.fft().is_parallel()
     }
 
     /// FFTs run so far by this workspace (kernel spectra included).
@@ -618,10 +698,11 @@ impl FastRemoval {
         if let Some(idx) = self.base[m] {
             return Ok(idx);
         }
-        let (f, dx, dy) = (self.field.as_ref(), self.grid.dx_mm, self.grid.dy_mm);
         let motion = [Motion::Resting, Motion::AlongX, Motion::AlongY][m];
-        let t = kernel_from_field(f, dx, dy, motion, self.half)?;
-        let idx = self.conv.push_kernel(t.rate_nm_per_s.view());
+        let hat = self.spectrum((m, 0), |f, dx, dy, half| {
+            kernel_from_field(f, dx, dy, motion, half)
+        })?;
+        let idx = self.conv.push_kernel_spectrum(hat);
         self.base[m] = Some(idx);
         Ok(idx)
     }
@@ -639,13 +720,12 @@ impl FastRemoval {
             e.used = now;
             return Ok(e.idx);
         }
-        let (f, dx, dy) = (self.field.as_ref(), self.grid.dx_mm, self.grid.dy_mm);
         let ph = q as f64 / PHASE_KEY_STEPS;
-        let t = match kind {
-            1 => along_x_at_phase_sized(f, dx, dy, ph, self.half)?,
-            2 => along_y_at_phase_sized(f, dx, dy, ph, self.half)?,
-            _ => point_at_phase_sized(f, dx, dy, ph, kind == 3, self.half)?,
-        };
+        let t = self.spectrum((kind, q), |f, dx, dy, half| match kind {
+            1 => along_x_at_phase_sized(f, dx, dy, ph, half),
+            2 => along_y_at_phase_sized(f, dx, dy, ph, half),
+            _ => point_at_phase_sized(f, dx, dy, ph, kind == 3, half),
+        })?;
         self.phase_builds += 1;
         let stale = self
             .phases
@@ -657,7 +737,7 @@ impl FastRemoval {
         match stale {
             Some(n) if self.phases.len() >= self.max_phases => {
                 let idx = self.phases[n].idx;
-                self.conv.set_kernel(idx, t.rate_nm_per_s.view());
+                self.conv.set_kernel_spectrum(idx, t);
                 self.phases[n] = PhaseKernel {
                     kind,
                     q,
@@ -667,7 +747,7 @@ impl FastRemoval {
                 Ok(idx)
             }
             _ => {
-                let idx = self.conv.push_kernel(t.rate_nm_per_s.view());
+                let idx = self.conv.push_kernel_spectrum(t);
                 self.phases.push(PhaseKernel {
                     kind,
                     q,
@@ -876,16 +956,20 @@ impl FastRemoval {
                 };
             }
         }
-        let mut views: Vec<Option<ArrayView2<f64>>> = vec![None; self.conv.kernel_count()];
-        for (t, m) in maps.iter().enumerate() {
-            if let Some(a) = m {
-                views[idx[t]] = Some(a.view());
-            }
-        }
-        let out = self.on_grid(&views);
+        // Summed in target order, whichever convolver slots the kernels took: a removal's
+        // bits do not depend on the calls before it (which phases were built, and where).
+        let views: Vec<(usize, ArrayView2<f64>)> = maps
+            .iter()
+            .enumerate()
+            .filter_map(|(t, m)| m.as_ref().map(|a| (idx[t], a.view())))
+            .collect();
+        let shape = (self.grid.rows, self.grid.cols);
+        let out = self.conv.apply_sum_window_ordered(&views, self.h, shape);
         // Back to the pool, zeroed.
+        let most =
+            (POOLED_MAP_BYTES / (8 * rows * cols).max(1)).clamp(MIN_POOLED_MAPS, MAX_POOLED_MAPS);
         for mut m in maps.into_iter().flatten() {
-            if self.pool.len() < MAX_POOLED_MAPS {
+            if self.pool.len() < most {
                 m.fill(0.0);
                 self.pool.push(m);
             }
@@ -894,13 +978,22 @@ impl FastRemoval {
     }
 }
 
-/// The map in `slot`, taken from `pool` (zeroed) or allocated on first use.
+/// The map in `slot`, taken from `pool` (zeroed) or allocated on first use. A new map's zeros
+/// are written, not left to fresh pages: the splat adds to a map (reads before it writes), and
+/// a page first read is the shared zero page, whose copy on the first write flushes the TLB of
+/// every thread of the process.
 fn pooled<'a>(
     slot: &'a mut Option<Array2<f64>>,
     pool: &mut Vec<Array2<f64>>,
     dim: (usize, usize),
 ) -> &'a mut Array2<f64> {
-    slot.get_or_insert_with(|| pool.pop().unwrap_or_else(|| Array2::zeros(dim)))
+    slot.get_or_insert_with(|| {
+        pool.pop().unwrap_or_else(|| {
+            let mut v: Vec<f64> = Vec::with_capacity(dim.0 * dim.1);
+            v.resize(dim.0 * dim.1, 0.0);
+            Array2::from_shape_vec(dim, v).expect("the length is rows x cols")
+        })
+    })
 }
 
 /// Options of the exact deposition.

@@ -556,8 +556,6 @@ fn flipped_matched(cur: &Current) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
         let h = cur
             .ev
             .kernels
-            .lock()
-            .ok()?
             .matched(Channel::Value, m, &cur.ev.exec)
             .ok()?;
         Some(h.iter().zip(dt).map(|(v, d)| v * d).collect())

@@ -27,6 +27,8 @@ pub mod tif_scale;
 
 use ndarray::Array2;
 
+use rayon::prelude::*;
+
 use crate::model::{Channel, Effect, Eval, Problem};
 
 /// A candidate effect: its linearised columns and how to turn their fitted coefficients into
@@ -67,12 +69,7 @@ impl Current<'_> {
     /// cannot be evaluated gives zeros (no candidate can come of it).
     pub fn matched(&self, ch: Channel) -> Vec<f64> {
         let r = self.resid_map();
-        let h = self
-            .ev
-            .kernels
-            .lock()
-            .ok()
-            .and_then(|mut c| c.matched(ch, &r, &self.ev.exec).ok());
+        let h = self.ev.kernels.matched(ch, &r, &self.ev.exec).ok();
         match h {
             Some(h) => h
                 .iter()
@@ -192,15 +189,22 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         ("fallback", fallback::candidates),
     ];
     let trace = std::env::var_os("BONNETLAB_TRACE").is_some();
-    let mut v = Vec::new();
-    for (name, make) in kinds {
-        let t0 = std::time::Instant::now();
-        v.extend(make(cur));
-        if trace {
-            eprintln!("  candidates {name}: {:?}", t0.elapsed());
-        }
-    }
-    v
+    // The kinds side by side (their columns go through different channels, or wait for the
+    // same one: see `Channels`), collected in the order above.
+    kinds
+        .par_iter()
+        .map(|(name, make)| {
+            let t0 = std::time::Instant::now();
+            let v = make(cur);
+            if trace {
+                eprintln!("  candidates {name}: {:?}", t0.elapsed());
+            }
+            v
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
+        .collect()
 }
 
 #[cfg(test)]

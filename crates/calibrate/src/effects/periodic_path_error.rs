@@ -203,8 +203,9 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         p.grid.cols as f64 * p.grid.dx_mm,
         p.grid.rows as f64 * p.grid.dy_mm,
     );
-    let mut out = Vec::new();
-    for axis_x in [true, false] {
+    // The two axes side by side (each through its own channel), collected x first.
+    let per_axis = |axis_x: bool| -> Vec<Candidate> {
+        let mut out = Vec::new();
         let kern = if axis_x { Channel::Dx } else { Channel::Dy };
         let h = cur.matched(kern);
         for coord in [Coord::X, Coord::Y, Coord::Arc, Coord::Time] {
@@ -256,6 +257,9 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
                 });
             }
         }
-    }
-    out
+        out
+    };
+    let (mut x, y) = rayon::join(|| per_axis(true), || per_axis(false));
+    x.extend(y);
+    x
 }

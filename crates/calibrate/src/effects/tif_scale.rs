@@ -1,6 +1,8 @@
 //! `tif_scale`: the working spot is the measured one widened by `scale` (`T_s(r) = T(r / s)`;
 //! its peak rate is left to the global rate fit). Linearised column `(dK/ds) * D`.
 
+use rayon::prelude::*;
+
 use crate::effects::{Candidate, Current};
 use crate::model::{evaluate, fit, Channel, Effect, Linear, Param, Problem, MAX_SCALE};
 
@@ -66,17 +68,31 @@ fn profiled_rss(cur: &Current, t: f64) -> Option<(f64, Vec<f64>)> {
     Some((f.rss, ev.cols[0].clone()))
 }
 
-/// The candidate's start. The profiled residual is not convex in the scale: on a raster the
-/// line-spacing ripple of the removal follows the spot's transfer function at 1/pitch, which
-/// oscillates with the width, so the residual has local minima about 0.1 apart in scale (on
-/// independent runs with the paper's bonnet at a 2 mm pitch the linearised start and the
-/// refinement from it settled at 0.95-0.96 for true scales 0.8, 1.1 and 1.2). So the scale is
-/// first scanned (0.7 to 1.45 by 0.05, then 0.025 either side of the best), and the column is
-/// the secant `R(t*) - R(1)` to the best scan point `t*`, whose coefficient interpolates the
-/// scale between 1 and `t*`. Without a better scan point, the derivative column `(dK/ds) * D`.
+/// The linearised candidate: the derivative column `(dK/ds) * D` at the current scale. The
+/// selection may replace it by [`scanned`] (see there) before it picks the round's contenders.
 pub fn candidates(cur: &Current) -> Vec<Candidate> {
     if cur.has("tif_scale") {
         return Vec::new();
+    }
+    vec![derivative_candidate(
+        cur.plain_column(Channel::Ds),
+        cur.ev.scale,
+    )]
+}
+
+/// The candidate from a scan of the scale. The profiled residual is not convex in the scale:
+/// on a raster the line-spacing ripple of the removal follows the spot's transfer function at
+/// 1/pitch, which oscillates with the width, so the residual has local minima about 0.1 apart
+/// in scale (on independent runs with the paper's bonnet at a 2 mm pitch the linearised start
+/// and the refinement from it settled at 0.95-0.96 for true scales 0.8, 1.1 and 1.2). So the
+/// scale is scanned (0.7 to 1.45 by 0.05, then 0.025 either side of the best), and the column
+/// is the secant `R(t*) - R(1)` to the best scan point `t*`, whose coefficient interpolates
+/// the scale between 1 and `t*`. None when the derivative column takes less than
+/// [`SCAN_GATE`] of the residual sum of squares (no widening is worth the scan) or no scan
+/// point fits better than the current scale.
+pub fn scanned(cur: &Current) -> Option<Candidate> {
+    if cur.has("tif_scale") {
+        return None;
     }
     let s = cur.ev.scale;
     let base_rss = cur
@@ -85,8 +101,6 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         .zip(&cur.ev.w)
         .map(|(r, w)| w * r * r)
         .sum::<f64>();
-    // The derivative column first: when it takes less than SCAN_GATE of the residual sum of
-    // squares, no widening is worth the scan (see SCAN_GATE) and it is the candidate.
     let col = cur.plain_column(Channel::Ds);
     let lin_gain = fit(cur.ev, std::slice::from_ref(&col))
         .map(|f| base_rss - f.rss)
@@ -99,47 +113,52 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         );
     }
     if lin_gain < SCAN_GATE * base_rss {
-        return vec![derivative_candidate(col, s)];
+        return None;
     }
     let mut best: Option<(f64, f64, Vec<f64>)> = None;
     let (lo, hi, step) = SCAN;
     let n = ((hi - lo) / step).round() as usize;
-    let consider = |t: f64, best: &mut Option<(f64, f64, Vec<f64>)>| {
-        if (t - 1.0).abs() < 1e-9 || t * s < 0.5 || t * s > MAX_SCALE {
-            return;
-        }
-        if let Some((rss, col)) = profiled_rss(cur, t) {
-            if rss < base_rss && best.as_ref().is_none_or(|b| rss < b.1) {
-                *best = Some((t, rss, col));
+    // The scales of a pass are evaluated side by side (each has its own forward model) and
+    // taken in the order given, so the best is the one the sequential scan would keep.
+    let consider = |ts: &[f64], best: &mut Option<(f64, f64, Vec<f64>)>| {
+        let got: Vec<Option<(f64, Vec<f64>)>> = ts
+            .par_iter()
+            .map(|&t| {
+                if (t - 1.0).abs() < 1e-9 || t * s < 0.5 || t * s > MAX_SCALE {
+                    return None;
+                }
+                profiled_rss(cur, t)
+            })
+            .collect();
+        for (&t, g) in ts.iter().zip(got) {
+            if let Some((rss, col)) = g {
+                if rss < base_rss && best.as_ref().is_none_or(|b| rss < b.1) {
+                    *best = Some((t, rss, col));
+                }
             }
         }
     };
-    for k in 0..=n {
-        consider(lo + k as f64 * step, &mut best);
-    }
+    let grid: Vec<f64> = (0..=n).map(|k| lo + k as f64 * step).collect();
+    consider(&grid, &mut best);
     if let Some(t0) = best.as_ref().map(|b| b.0) {
-        for t in [t0 - 0.5 * step, t0 + 0.5 * step] {
-            consider(t, &mut best);
-        }
+        consider(&[t0 - 0.5 * step, t0 + 0.5 * step], &mut best);
     }
-    if let Some((t, _, col)) = best {
-        let secant: Vec<f64> = col
-            .iter()
-            .zip(&cur.ev.cols[0])
-            .map(|(a, b)| a - b)
-            .collect();
-        return vec![Candidate {
-            key: "tif_scale".into(),
-            kind: "tif_scale",
-            extra: vec![secant],
-            make: Box::new(move |c, s0| {
-                Box::new(TifScale {
-                    scale: (1.0 + (t - 1.0) * c[0] / s0).clamp(0.5, MAX_SCALE),
-                })
-            }),
-        }];
-    }
-    vec![derivative_candidate(col, s)]
+    let (t, _, col) = best?;
+    let secant: Vec<f64> = col
+        .iter()
+        .zip(&cur.ev.cols[0])
+        .map(|(a, b)| a - b)
+        .collect();
+    Some(Candidate {
+        key: "tif_scale".into(),
+        kind: "tif_scale",
+        extra: vec![secant],
+        make: Box::new(move |c, s0| {
+            Box::new(TifScale {
+                scale: (1.0 + (t - 1.0) * c[0] / s0).clamp(0.5, MAX_SCALE),
+            })
+        }),
+    })
 }
 
 /// The linearised candidate: the derivative column `(dK/ds) * D` at the current scale `s`.
