@@ -373,8 +373,10 @@ fn settle(rms_before: f64, rms_after: &[f64], noise_rms: f64) -> usize {
 }
 
 /// Share of the excess residual over the noise floor (sum of squares) that another kind's
-/// held-out reduction must reach for the round to skip the TIF-scale scan.
+/// held-out reduction must reach for the round to skip the TIF-scale scan, and the most the
+/// derivative column's own held-out reduction may be of that other one's.
 const SCAN_SKIP_SHARE: f64 = 0.8;
+const SCAN_SKIP_RATIO: f64 = 0.1;
 
 /// Runs the whole calibration on a prepared problem.
 pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateError> {
@@ -477,8 +479,11 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         let (mut cands, mut scores): (Vec<Candidate>, Vec<Score>) = (cands, scores);
         // The scan of the TIF scale (`tif_scale::scanned`) costs a forward model per scale
         // scanned. It is skipped while another kind's candidate takes at least
-        // SCAN_SKIP_SHARE of the excess over the noise floor on held-out data: no widening
-        // could take more than the rest this round, and the next round looks again.
+        // SCAN_SKIP_SHARE of the excess over the noise floor on held-out data and the
+        // derivative column less than SCAN_SKIP_RATIO of that: then no widening competes
+        // this round, and the next round looks again. A derivative column that competes
+        // (a wider spot whose linearised start falls in a local minimum, with a feed
+        // covariate standing in for the rest) is always scanned.
         if let Some(ti) = cands.iter().position(|c| c.kind == "tif_scale") {
             let excess = f.rss - f.n * noise * noise;
             let other_top = cands
@@ -488,10 +493,19 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                 .filter(|&(i, (_, s))| i != ti && s.significant())
                 .map(|(_, (_, s))| s.delta)
                 .fold(0.0, f64::max);
-            let explained = excess > 0.0 && other_top >= SCAN_SKIP_SHARE * excess;
+            let own = scores[ti].delta;
+            let explained = excess > 0.0
+                && other_top >= SCAN_SKIP_SHARE * excess
+                && own < SCAN_SKIP_RATIO * other_top;
             if trace {
+                let ratio = if other_top > 0.0 {
+                    format!("{:.3}", own / other_top)
+                } else {
+                    "-".into()
+                };
                 eprintln!(
-                    "tif_scale scan: best other candidate takes {:.2} of the excess{}",
+                    "tif_scale scan: best other candidate takes {:.2} of the excess, the \
+                     derivative column {ratio} of that{}",
                     other_top / excess.max(1e-300),
                     if explained { " (skipped)" } else { "" }
                 );
