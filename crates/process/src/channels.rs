@@ -32,10 +32,12 @@ fn slot(c: Channel) -> usize {
 }
 
 /// Removal workspaces of the channels of one TIF at one widening on one grid. Callers may share
-/// it across threads: each channel keeps a small pool of workspaces, so calls run side by side
-/// (on a grid small enough that its transforms run on one thread; on a larger one a channel has
-/// one workspace, whose transforms use every thread). A removal's bits do not depend on which
-/// workspace made it, or on what that workspace made before ([`FastRemoval::removal`]).
+/// it across threads: a call takes an idle workspace of its channel or builds one (never
+/// waiting for another caller's), and the channel's workspaces share the kernel spectra they
+/// build. As many idle ones are kept as there are threads where a grid's transforms run on one
+/// thread, one where they use every thread. A removal's bits do not depend on which workspace
+/// made it, or on what that workspace made before (its kernels are summed in the order of the
+/// path's targets, not of the slots they took).
 pub struct Channels {
     base: Arc<dyn RateField + Send>,
     grid: Grid,
