@@ -978,10 +978,12 @@ impl FastRemoval {
     }
 }
 
-/// The map in `slot`, taken from `pool` (zeroed) or allocated on first use. A new map's zeros
-/// are written, not left to fresh pages: the splat adds to a map (reads before it writes), and
-/// a page first read is the shared zero page, whose copy on the first write flushes the TLB of
-/// every thread of the process.
+/// The map in `slot`, taken from `pool` (zeroed) or allocated on first use. A small new map's
+/// zeros are written, not left to fresh pages: the splat adds to a map (reads before it
+/// writes), and a page first read is the shared zero page, whose copy on the first write
+/// flushes the TLB of every thread of the process. A large one (beyond
+/// [`WRITTEN_ZEROS_BYTES`]) keeps its fresh pages: a raster touches a few rows of a phase map,
+/// and writing the rest would cost more than those flushes.
 fn pooled<'a>(
     slot: &'a mut Option<Array2<f64>>,
     pool: &mut Vec<Array2<f64>>,
@@ -989,12 +991,19 @@ fn pooled<'a>(
 ) -> &'a mut Array2<f64> {
     slot.get_or_insert_with(|| {
         pool.pop().unwrap_or_else(|| {
-            let mut v: Vec<f64> = Vec::with_capacity(dim.0 * dim.1);
-            v.resize(dim.0 * dim.1, 0.0);
+            let n = dim.0 * dim.1;
+            if 8 * n > WRITTEN_ZEROS_BYTES {
+                return Array2::zeros(dim);
+            }
+            let mut v: Vec<f64> = Vec::with_capacity(n);
+            v.resize(n, 0.0);
             Array2::from_shape_vec(dim, v).expect("the length is rows x cols")
         })
     })
 }
+
+/// Largest new dwell map whose zeros are written at allocation (bytes; see [`pooled`]).
+const WRITTEN_ZEROS_BYTES: usize = 2 << 20;
 
 /// Options of the exact deposition.
 #[derive(Debug, Clone, Copy, PartialEq)]
