@@ -143,8 +143,8 @@ impl Covariates {
     }
 }
 
-/// The forward model's channels at one TIF scale (shared: each channel's workspace takes one
-/// caller at a time, so requests through different channels run side by side).
+/// The forward model's channels at one TIF scale, shared by the threads of a calibration
+/// (each channel lends a workspace per caller; see `Channels`).
 pub type Kernels = Channels;
 
 /// The data of a run, prepared once.

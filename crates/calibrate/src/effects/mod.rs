@@ -189,8 +189,8 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         ("fallback", fallback::candidates),
     ];
     let trace = std::env::var_os("BONNETLAB_TRACE").is_some();
-    // The kinds side by side (their columns go through different channels, or wait for the
-    // same one: see `Channels`), collected in the order above.
+    // The kinds side by side (each column takes an idle forward-model workspace of its
+    // channel or builds one: see `Channels`), collected in the order above.
     kinds
         .par_iter()
         .map(|(name, make)| {
