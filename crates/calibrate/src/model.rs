@@ -21,6 +21,7 @@ use bonnetlab_surface::Surface;
 use ndarray::Array2;
 
 use bonnetlab_process::channels::Channels;
+use bonnetlab_process::removal::Fidelity;
 pub use bonnetlab_process::tif::derived::Channel;
 
 use crate::error::CalibrateError;
@@ -415,13 +416,30 @@ impl Problem {
         exec: &PathLog,
         terms: &[(Channel, Option<&[f64]>)],
     ) -> Result<Vec<f64>, CalibrateError> {
-        let key = fingerprint(k.scale(), exec, terms);
+        self.column_at(Fidelity::Full, k, exec, terms)
+    }
+
+    /// [`Self::column`] at a given [`Fidelity`]: `Screening` for the candidate columns of the
+    /// selection (a path whose lines spread takes its motion's centred kernel; the fits and
+    /// everything reported use `Full`). Cached apart from the full columns.
+    pub fn column_at(
+        &self,
+        fidelity: Fidelity,
+        k: &Kernels,
+        exec: &PathLog,
+        terms: &[(Channel, Option<&[f64]>)],
+    ) -> Result<Vec<f64>, CalibrateError> {
+        let salt = match fidelity {
+            Fidelity::Full => 0,
+            Fidelity::Screening => 0x5c3e_e2a1_97d4_0b6f_81f2_4c7a_d935_e068_u128,
+        };
+        let key = fingerprint(k.scale(), exec, terms) ^ salt;
         if let Some(hit) = self.columns.lock().ok().and_then(|m| m.get(key)) {
             return Ok(hit.as_ref().clone());
         }
         let col = match terms {
-            [(ch, g)] => self.compress(&k.removal(*ch, exec, *g)?),
-            _ => self.compress(&k.removal_sum(exec, terms)?),
+            [(ch, g)] => self.compress(&k.removal_at(fidelity, *ch, exec, *g)?),
+            _ => self.compress(&k.removal_sum_at(fidelity, exec, terms)?),
         };
         if let Ok(mut m) = self.columns.lock() {
             m.put(key, Arc::new(col.clone()));

@@ -16,7 +16,7 @@ use crate::fft::Convolver;
 use crate::grid::Grid;
 use crate::interp::bilinear;
 use crate::path::PathLog;
-use crate::removal::{FastRemoval, SharedSpectra};
+use crate::removal::{FastRemoval, Fidelity, SharedSpectra};
 use crate::tif::derived::{Channel, Derived};
 use crate::tif::{RateField, Tif};
 
@@ -145,7 +145,23 @@ impl Channels {
         path: &PathLog,
         weights: Option<&[f64]>,
     ) -> Result<Array2<f64>, ProcessError> {
-        self.workspace(ch)?.get().removal(path, weights)
+        self.removal_at(Fidelity::Full, ch, path, weights)
+    }
+
+    /// [`Self::removal`] at a given [`Fidelity`] (`Screening` for candidate columns only).
+    pub fn removal_at(
+        &self,
+        fidelity: Fidelity,
+        ch: Channel,
+        path: &PathLog,
+        weights: Option<&[f64]>,
+    ) -> Result<Array2<f64>, ProcessError> {
+        let mut ws = self.workspace(ch)?;
+        let w = ws.get();
+        w.set_fidelity(fidelity);
+        let out = w.removal(path, weights);
+        w.set_fidelity(Fidelity::Full);
+        out
     }
 
     /// Sum of several channels' removals of the same path, each with its own weights.
@@ -154,9 +170,19 @@ impl Channels {
         path: &PathLog,
         terms: &[(Channel, Option<&[f64]>)],
     ) -> Result<Array2<f64>, ProcessError> {
+        self.removal_sum_at(Fidelity::Full, path, terms)
+    }
+
+    /// [`Self::removal_sum`] at a given [`Fidelity`].
+    pub fn removal_sum_at(
+        &self,
+        fidelity: Fidelity,
+        path: &PathLog,
+        terms: &[(Channel, Option<&[f64]>)],
+    ) -> Result<Array2<f64>, ProcessError> {
         let mut out = Array2::zeros((self.grid.rows, self.grid.cols));
         for (ch, w) in terms {
-            out += &self.removal(*ch, path, *w)?;
+            out += &self.removal_at(fidelity, *ch, path, *w)?;
         }
         Ok(out)
     }

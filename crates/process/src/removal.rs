@@ -511,6 +511,26 @@ pub struct FastRemoval {
     pool: Vec<Array2<f64>>,
     /// Kernel spectra shared with the other workspaces of the same field and grid, if any.
     shared: Option<SharedSpectra>,
+    /// How finely the next removals resolve a motion whose lines spread.
+    fidelity: Fidelity,
+}
+
+/// How finely a removal resolves dwell whose raster lines spread over sub-pixel phases (a path
+/// that wanders: a logged path's jitter, or a path moved by a wiggle).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Fidelity {
+    /// Phase kernels at [`PHASE_NODES`] fixed phases, the dwell shared linearly between them:
+    /// the footprint's steep rim where the line passes (what `simulate` and the calibration's
+    /// fits use).
+    #[default]
+    Full,
+    /// That dwell splatted cubically across its motion onto the motion's centred kernel: one
+    /// map and one transform per motion instead of up to [`PHASE_NODES`]. The rim's sub-pixel
+    /// position is then interpolated, so the ripple at the raster pitch is a few per cent off,
+    /// while the removal's bulk and its smooth changes with a rate or a displacement are
+    /// unchanged: for screening many candidate columns, never for a reported removal. A path
+    /// whose lines keep a few phases is computed as in `Full`, to the bit.
+    Screening,
 }
 
 /// Kernel spectra shared by workspaces of one field on one grid (the pool of a channel, see
@@ -616,7 +636,13 @@ impl FastRemoval {
             walk_phases: [Lines::Spread, Lines::Spread],
             pool: Vec::new(),
             shared: None,
+            fidelity: Fidelity::Full,
         })
+    }
+
+    /// Sets how finely the next removals resolve spread line phases (see [`Fidelity`]).
+    pub fn set_fidelity(&mut self, fidelity: Fidelity) {
+        self.fidelity = fidelity;
     }
 
     /// Shares kernel spectra with other workspaces of the same field on the same grid (each
@@ -864,8 +890,13 @@ impl FastRemoval {
         let nodes: Vec<f64> = (0..PHASE_NODES)
             .map(|j| j as f64 / PHASE_NODES as f64)
             .collect();
-        let wanted = |l: &Lines| -> Vec<f64> {
-            match l {
+        // Screening puts a spread motion on its centred kernel (see `Fidelity::Screening`).
+        let centred = [0, 1].map(|k| {
+            self.fidelity == Fidelity::Screening && matches!(lines[k], Lines::Spread)
+        });
+        let wanted = |k: usize| -> Vec<f64> {
+            match &lines[k] {
+                _ if centred[k] => Vec::new(),
                 Lines::Phases(lp) => lp.phase.clone(),
                 Lines::Spread => nodes.clone(),
             }
@@ -876,8 +907,8 @@ impl FastRemoval {
             _ => k,
         };
         let [sx, sy] = self.phase_kernels([
-            (kind_of(1), &wanted(&lines[0])),
-            (kind_of(2), &wanted(&lines[1])),
+            (kind_of(1), &wanted(0)),
+            (kind_of(2), &wanted(1)),
         ])?;
         // Where each motion's stray dwell (off its lines, or a minor share of a sub-step) goes:
         // with one motion minor, onto the point-sampled kernel (see MINOR_MOTION_SHARE), else
@@ -925,6 +956,7 @@ impl FastRemoval {
                     }
                 };
                 match &lines[kind - 1] {
+                    _ if centred[kind - 1] => splat_cubic(get!(kind), u, v, w * share),
                     _ if share < MINOR_SHARE => splat_cubic(get!(sink(kind)), u, v, w * share),
                     Lines::Phases(lp) => match lp.bin_cluster[b] {
                         u8::MAX => splat_cubic(get!(sink(kind)), u, v, w * share),
@@ -1303,6 +1335,54 @@ mod tests {
             d < 0.002 * rms_y,
             "along Y: diff {d} vs removal rms {rms_y}"
         );
+    }
+
+    #[test]
+    fn screening_is_the_full_model_on_a_raster_and_one_kernel_per_motion_on_a_wiggled_path() {
+        // A raster with five line phases (1.7 mm pitch on 0.5 mm pixels): screening gives the
+        // full model's bits. The same raster wiggled across its lines (0.3 mm at a 7 mm period
+        // along x): its phases spread, the full model shares the dwell between the fixed phase
+        // nodes, screening splats it onto the centred kernels. Both against exact deposition.
+        let grid = Grid::new(60, 80, 0.5, 0.5, 0.0, 0.0).unwrap();
+        let g = GaussianTif::new(2.0, 12.0, 3.0).unwrap();
+        let dgrid = grid.grown(20, 20);
+        let dens = Array2::from_shape_fn((dgrid.rows, dgrid.cols), |(i, j)| {
+            let (x, y) = (dgrid.x_mm(j) - 20.0, dgrid.y_mm(i) - 15.0);
+            0.3 * (1.0 + 0.6 * (-(x * x + y * y) / 50.0).exp())
+        });
+        let r = RasterSpec::over_rect((-6.0, 46.0), (-6.0, 36.0), 1.7, 2.0);
+        let lim = crate::path::kinematics::Limits::default();
+        let (p, _) = crate::path::kinematics::dwell_raster(&r, &dens, &dgrid, &lim, 0.2).unwrap();
+        let run = |path: &PathLog, fidelity: Fidelity| {
+            let mut f = FastRemoval::from_field(&g, &grid).unwrap();
+            f.set_fidelity(fidelity);
+            let out = f.removal(path, None).unwrap();
+            (out, f.fft_count(), f.phase_kernel_builds())
+        };
+        let (full, _, builds) = run(&p, Fidelity::Full);
+        let (screen, _, _) = run(&p, Fidelity::Screening);
+        assert!(builds >= 3, "{builds}");
+        assert_eq!(full, screen);
+        let mut q = p.clone();
+        for (y, x) in q.y_mm.iter_mut().zip(&p.x_mm) {
+            *y += 0.3 * (2.0 * std::f64::consts::PI * x / 7.0).sin();
+        }
+        let (full, full_ffts, _) = run(&q, Fidelity::Full);
+        let (screen, screen_ffts, _) = run(&q, Fidelity::Screening);
+        let exact = deposit_exact(&q, &g, &grid, None, &ExactOptions::default()).unwrap();
+        let mean = exact.mean().unwrap();
+        let drms = |a: &Array2<f64>, b: &Array2<f64>| {
+            ((a - b).iter().map(|v| v * v).sum::<f64>() / a.len() as f64).sqrt()
+        };
+        let rms = drms(&exact, &Array2::from_elem(exact.dim(), mean));
+        let (d_full, d_screen) = (drms(&full, &exact), drms(&screen, &exact));
+        eprintln!(
+            "wiggled: removal rms {rms:.4}, full {d_full:.2e} ({full_ffts} FFTs), screening \
+             {d_screen:.2e} ({screen_ffts} FFTs)"
+        );
+        assert!(d_full < 0.005 * rms, "full: {d_full} vs {rms}");
+        assert!(d_screen < 0.015 * rms, "screening: {d_screen} vs {rms}");
+        assert!(2 * screen_ffts < full_ffts, "{screen_ffts} vs {full_ffts}");
     }
 
     #[test]

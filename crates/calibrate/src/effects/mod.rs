@@ -29,6 +29,8 @@ use ndarray::Array2;
 
 use rayon::prelude::*;
 
+use bonnetlab_process::removal::Fidelity;
+
 use crate::model::{Channel, Effect, Eval, Problem};
 
 /// A candidate effect: its linearised columns and how to turn their fitted coefficients into
@@ -82,19 +84,20 @@ impl Current<'_> {
 
     /// Column `sum_m R_{ch_m}(exec, g_m)` (the forward model through channel `ch_m` of the
     /// executed path with rate weights `g_m`), on the analysis pixels; zeros when a channel
-    /// cannot be evaluated (no candidate can come of it).
+    /// cannot be evaluated (no candidate can come of it). At screening fidelity: a candidate's
+    /// columns only score it and start its fit, which the full model then refines.
     pub fn column(&self, terms: &[(&[f64], Channel)]) -> Vec<f64> {
         let t: Vec<(Channel, Option<&[f64]>)> =
             terms.iter().map(|(g, ch)| (*ch, Some(*g))).collect();
         self.p
-            .column(&self.ev.kernels, &self.ev.exec, &t)
+            .column_at(Fidelity::Screening, &self.ev.kernels, &self.ev.exec, &t)
             .unwrap_or_else(|_| vec![0.0; self.p.idx.len()])
     }
 
     /// Column of the plain executed path through channel `ch` (no rate weights).
     pub fn plain_column(&self, ch: Channel) -> Vec<f64> {
         self.p
-            .channel_column(&self.ev.kernels, ch, &self.ev.exec, None)
+            .column_at(Fidelity::Screening, &self.ev.kernels, &self.ev.exec, &[(ch, None)])
             .unwrap_or_else(|_| vec![0.0; self.p.idx.len()])
     }
 
