@@ -891,9 +891,8 @@ impl FastRemoval {
             .map(|j| j as f64 / PHASE_NODES as f64)
             .collect();
         // Screening puts a spread motion on its centred kernel (see `Fidelity::Screening`).
-        let centred = [0, 1].map(|k| {
-            self.fidelity == Fidelity::Screening && matches!(lines[k], Lines::Spread)
-        });
+        let centred = [0, 1]
+            .map(|k| self.fidelity == Fidelity::Screening && matches!(lines[k], Lines::Spread));
         let wanted = |k: usize| -> Vec<f64> {
             match &lines[k] {
                 _ if centred[k] => Vec::new(),
@@ -906,10 +905,7 @@ impl FastRemoval {
             Lines::Phases(lp) if lp.minor => k + 2,
             _ => k,
         };
-        let [sx, sy] = self.phase_kernels([
-            (kind_of(1), &wanted(0)),
-            (kind_of(2), &wanted(1)),
-        ])?;
+        let [sx, sy] = self.phase_kernels([(kind_of(1), &wanted(0)), (kind_of(2), &wanted(1))])?;
         // Where each motion's stray dwell (off its lines, or a minor share of a sub-step) goes:
         // with one motion minor, onto the point-sampled kernel (see MINOR_MOTION_SHARE), else
         // onto its own motion's centred kernel.

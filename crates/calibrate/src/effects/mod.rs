@@ -97,7 +97,12 @@ impl Current<'_> {
     /// Column of the plain executed path through channel `ch` (no rate weights).
     pub fn plain_column(&self, ch: Channel) -> Vec<f64> {
         self.p
-            .column_at(Fidelity::Screening, &self.ev.kernels, &self.ev.exec, &[(ch, None)])
+            .column_at(
+                Fidelity::Screening,
+                &self.ev.kernels,
+                &self.ev.exec,
+                &[(ch, None)],
+            )
             .unwrap_or_else(|_| vec![0.0; self.p.idx.len()])
     }
 
