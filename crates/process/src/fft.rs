@@ -676,6 +676,22 @@ impl MultiConvolver {
         origin: (usize, usize),
         shape: (usize, usize),
     ) -> Array2<f64> {
+        let hinted: Vec<(usize, ArrayView2<f64>, Option<&[bool]>)> =
+            inputs.iter().map(|(k, v)| (*k, v.view(), None)).collect();
+        self.apply_sum_window_hinted(&hinted, origin, shape)
+    }
+
+    /// [`MultiConvolver::apply_sum_window_ordered`] with, per input, the rows that may hold
+    /// anything (`Some(rows)`: row `i` is all zero where `rows[i]` is false, and is then not
+    /// read at all; `None`: every row is looked at). Same result, bit for bit; a caller that
+    /// knows where it wrote (a raster's phase maps: one row per line) saves reading, and
+    /// faulting in, the pages of a large map it never touched.
+    pub fn apply_sum_window_hinted(
+        &mut self,
+        inputs: &[(usize, ArrayView2<f64>, Option<&[bool]>)],
+        origin: (usize, usize),
+        shape: (usize, usize),
+    ) -> Array2<f64> {
         let (r0, c0) = origin;
         assert!(
             r0 + shape.0 <= self.rows && c0 + shape.1 <= self.cols,
@@ -684,13 +700,13 @@ impl MultiConvolver {
         let n1 = self.fft.shape().1;
         let parallel = self.fft.is_parallel();
         let mut any = false;
-        for (k, input) in inputs {
+        for (k, input, hint) in inputs {
             let kh = &self.kernel_hats[*k];
             let view = input.slice(ndarray::s![
                 ..self.rows.min(input.nrows()),
                 ..self.cols.min(input.ncols())
             ]);
-            if let Some(cols) = live_columns(view, MAX_SPARSE_COLUMNS, &mut self.live_cols) {
+            if let Some(cols) = live_columns(view, *hint, MAX_SPARSE_COLUMNS, &mut self.live_cols) {
                 self.fft
                     .forward_columns(view, cols, &mut self.spec, &mut self.colbuf);
             } else {
@@ -698,8 +714,8 @@ impl MultiConvolver {
                     &mut self.real,
                     n1,
                     *input,
-                    self.rows,
-                    self.cols,
+                    *hint,
+                    (self.rows, self.cols),
                     &mut self.live,
                 );
                 self.fft.forward_live(
@@ -790,12 +806,16 @@ const MAX_SPARSE_COLUMNS: usize = 4;
 /// most `max` of them (else `None`).
 fn live_columns<'a>(
     input: ArrayView2<f64>,
+    hint: Option<&[bool]>,
     max: usize,
     out: &'a mut Vec<usize>,
 ) -> Option<&'a [usize]> {
     let mut on = vec![false; input.ncols()];
     let mut n = 0;
-    for row in input.rows() {
+    for (i, row) in input.rows().into_iter().enumerate() {
+        if hint.is_some_and(|h| !h.get(i).copied().unwrap_or(false)) {
+            continue;
+        }
         for (j, v) in row.iter().enumerate() {
             if *v != 0.0 && !on[j] {
                 on[j] = true;
@@ -815,14 +835,17 @@ fn load_live_rows(
     real: &mut [f64],
     n1: usize,
     input: ArrayView2<f64>,
-    rows: usize,
-    cols: usize,
+    hint: Option<&[bool]>,
+    (rows, cols): (usize, usize),
     live: &mut Vec<bool>,
 ) {
     let (r, c) = (rows.min(input.nrows()), cols.min(input.ncols()));
     live.clear();
     live.resize(real.len() / n1.max(1), false);
     for i in 0..r {
+        if hint.is_some_and(|h| !h.get(i).copied().unwrap_or(false)) {
+            continue;
+        }
         let row = input.row(i);
         if row.iter().take(c).all(|v| *v == 0.0) {
             continue;

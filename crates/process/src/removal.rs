@@ -925,16 +925,27 @@ impl FastRemoval {
         // kernels of `sx` and `sy`; their convolver indices are resolved after the splat.
         let (rows, cols) = (self.ext.rows, self.ext.cols);
         let mut maps: Vec<Option<Array2<f64>>> = vec![None; 3 + sx.len() + sy.len()];
+        // Rows each map has dwell in (a raster's phase map holds one row per line): only these
+        // are zeroed again for the pool.
+        let mut hit: Vec<RowSpan> = vec![RowSpan::default(); maps.len()];
         let pool = &mut self.pool;
+        // The map of target `t`, its rows from `i0` to `i1` (clamped to the grid) marked.
         macro_rules! get {
-            ($t:expr) => {
+            ($t:expr, $i0:expr, $i1:expr) => {{
+                hit[$t].mark($i0, $i1, rows);
                 pooled(&mut maps[$t], pool, (rows, cols))
-            };
+            }};
         }
+        // A cubic splat's rows about fractional row `u`.
+        let taps = |u: f64| {
+            let i = u.floor() as isize;
+            (i - 1, i + 2)
+        };
         for st in steps {
             let (u, v, w, shares) = (st.u, st.v, st.w, st.shares);
+            let (c0, c1) = taps(u);
             if shares[0] > 0.0 {
-                splat_cubic(get!(0), u, v, w * shares[0]);
+                splat_cubic(get!(0, c0, c1), u, v, w * shares[0]);
             }
             for kind in [1, 2] {
                 let share = shares[kind];
@@ -951,23 +962,33 @@ impl FastRemoval {
                         splat_cubic_col(d, along, n, w);
                     }
                 };
+                // Rows a `put` on lane `n` reaches: that row (along X), or the cubic taps about
+                // row `u` (along Y).
+                let lane = |n: isize| if kind == 1 { (n, n) } else { (c0, c1) };
                 match &lines[kind - 1] {
-                    _ if centred[kind - 1] => splat_cubic(get!(kind), u, v, w * share),
-                    _ if share < MINOR_SHARE => splat_cubic(get!(sink(kind)), u, v, w * share),
+                    _ if centred[kind - 1] => splat_cubic(get!(kind, c0, c1), u, v, w * share),
+                    _ if share < MINOR_SHARE => {
+                        splat_cubic(get!(sink(kind), c0, c1), u, v, w * share)
+                    }
                     Lines::Phases(lp) => match lp.bin_cluster[b] {
-                        u8::MAX => splat_cubic(get!(sink(kind)), u, v, w * share),
-                        c => put(get!(base + c as usize), n, w * share),
+                        u8::MAX => splat_cubic(get!(sink(kind), c0, c1), u, v, w * share),
+                        c => {
+                            let (i0, i1) = lane(n);
+                            put(get!(base + c as usize, i0, i1), n, w * share)
+                        }
                     },
                     Lines::Spread => {
                         // Across the motion: `n` whole pixels plus phase `f`.
                         let x = f * PHASE_NODES as f64;
                         let j = (x.floor() as usize).min(PHASE_NODES - 1);
                         let t = x - j as f64;
-                        put(get!(base + j), n, w * share * (1.0 - t));
+                        let (i0, i1) = lane(n);
+                        put(get!(base + j, i0, i1), n, w * share * (1.0 - t));
                         if j + 1 < PHASE_NODES {
-                            put(get!(base + j + 1), n, w * share * t);
+                            put(get!(base + j + 1, i0, i1), n, w * share * t);
                         } else {
-                            put(get!(base), n + 1, w * share * t);
+                            let (i0, i1) = lane(n + 1);
+                            put(get!(base, i0, i1), n + 1, w * share * t);
                         }
                     }
                 }
@@ -986,23 +1007,53 @@ impl FastRemoval {
         }
         // Summed in target order, whichever convolver slots the kernels took: a removal's
         // bits do not depend on the calls before it (which phases were built, and where).
-        let views: Vec<(usize, ArrayView2<f64>)> = maps
+        // Only the rows a map has dwell in are read (a large fresh map's other pages are never
+        // touched).
+        let views: Vec<(usize, ArrayView2<f64>, Option<&[bool]>)> = maps
             .iter()
             .enumerate()
-            .filter_map(|(t, m)| m.as_ref().map(|a| (idx[t], a.view())))
+            .filter_map(|(t, m)| m.as_ref().map(|a| (idx[t], a.view(), Some(&hit[t].0[..]))))
             .collect();
         let shape = (self.grid.rows, self.grid.cols);
-        let out = self.conv.apply_sum_window_ordered(&views, self.h, shape);
+        let out = self.conv.apply_sum_window_hinted(&views, self.h, shape);
         // Back to the pool, zeroed.
         let most =
             (POOLED_MAP_BYTES / (8 * rows * cols).max(1)).clamp(MIN_POOLED_MAPS, MAX_POOLED_MAPS);
-        for mut m in maps.into_iter().flatten() {
-            if self.pool.len() < most {
-                m.fill(0.0);
-                self.pool.push(m);
+        for (m, span) in maps.into_iter().zip(&hit) {
+            if let Some(mut m) = m {
+                if self.pool.len() < most {
+                    span.zero(&mut m);
+                    self.pool.push(m);
+                }
             }
         }
         Ok(out)
+    }
+}
+
+/// The rows of a dwell map that may hold dwell: a bitmap, sized on first mark.
+#[derive(Debug, Clone, Default)]
+struct RowSpan(Vec<bool>);
+
+impl RowSpan {
+    /// Marks rows `i0..=i1` (those inside `0..rows`).
+    #[inline]
+    fn mark(&mut self, i0: isize, i1: isize, rows: usize) {
+        if self.0.is_empty() {
+            self.0.resize(rows, false);
+        }
+        let lo = i0.max(0) as usize;
+        let hi = (i1 + 1).clamp(0, rows as isize) as usize;
+        for r in self.0.iter_mut().take(hi).skip(lo) {
+            *r = true;
+        }
+    }
+
+    /// Zeroes the marked rows of `m` (the others hold no dwell).
+    fn zero(&self, m: &mut Array2<f64>) {
+        for (i, _) in self.0.iter().enumerate().filter(|(_, h)| **h) {
+            m.row_mut(i).fill(0.0);
+        }
     }
 }
 
