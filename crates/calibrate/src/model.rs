@@ -19,6 +19,7 @@ use std::sync::{Arc, Mutex};
 
 use bonnetlab_surface::Surface;
 use ndarray::Array2;
+use rayon::prelude::*;
 
 use bonnetlab_process::channels::Channels;
 use bonnetlab_process::removal::Fidelity;
@@ -677,11 +678,15 @@ pub fn evaluate(
     let kernels = p.kernels(scale)?;
     let exec = p.samples.path_through(&xs, &ys);
     let mut names = vec!["baseline".to_string()];
-    let mut cols = vec![p.channel_column(&kernels, Channel::Value, &exec, None)?];
-    let mut means = vec![0.0];
     let terms: Vec<(String, Vec<f64>)> = effects.iter().flat_map(|e| e.rate_terms(p)).collect();
-    let built: Vec<(String, Vec<f64>, f64)> = terms_columns(p, &exec, &kernels, terms)?;
-    for (n, c, mean) in built {
+    // The baseline column beside the rate terms' (each takes a workspace of its own).
+    let (base, built) = rayon::join(
+        || p.channel_column(&kernels, Channel::Value, &exec, None),
+        || terms_columns(p, &exec, &kernels, terms),
+    );
+    let mut cols = vec![base?];
+    let mut means = vec![0.0];
+    for (n, c, mean) in built? {
         names.push(n);
         cols.push(c);
         means.push(mean);
@@ -720,8 +725,9 @@ pub fn terms_columns(
     kernels: &Kernels,
     terms: Vec<(String, Vec<f64>)>,
 ) -> Result<Vec<(String, Vec<f64>, f64)>, CalibrateError> {
+    // Side by side, collected in order.
     terms
-        .into_iter()
+        .into_par_iter()
         .map(|(n, g)| {
             let mean = p.samples.dwell_mean(&g);
             let gc: Vec<f64> = g.iter().map(|v| v - mean).collect();

@@ -17,6 +17,7 @@
 //! the same round as the named kinds, where fewer parameters win near-ties and unknown kinds
 //! sort last, so a named kind that explains the residual as well is preferred.
 
+use rayon::prelude::*;
 use std::sync::Arc;
 
 use crate::effects::{Candidate, Current};
@@ -560,19 +561,26 @@ fn flipped_matched(cur: &Current) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
             .ok()?;
         Some(h.iter().zip(dt).map(|(v, d)| v * d).collect())
     };
-    let obs = run(&r)?;
-    let mut null = Vec::with_capacity(FLIPS as usize);
-    for f in 0..FLIPS {
-        let mut m = r.clone();
-        for ((i, j), v) in m.indexed_iter_mut() {
-            let blk = ((i / b) * nbc + j / b) as u64;
-            if splitmix(blk ^ (f + 1).wrapping_mul(0xA076_1D64_78BD_642F)) & 1 == 1 {
-                *v = -*v;
+    // The residual and its flipped copies side by side, collected in order.
+    let all: Vec<Option<Vec<f64>>> = (0..=FLIPS)
+        .into_par_iter()
+        .map(|f| {
+            if f == 0 {
+                return run(&r);
             }
-        }
-        null.push(run(&m)?);
-    }
-    Some((obs, null))
+            let mut m = r.clone();
+            for ((i, j), v) in m.indexed_iter_mut() {
+                let blk = ((i / b) * nbc + j / b) as u64;
+                if splitmix(blk ^ f.wrapping_mul(0xA076_1D64_78BD_642F)) & 1 == 1 {
+                    *v = -*v;
+                }
+            }
+            run(&m)
+        })
+        .collect();
+    let mut all = all.into_iter().collect::<Option<Vec<_>>>()?;
+    let obs = all.remove(0);
+    Some((obs, all))
 }
 
 fn splitmix(x: u64) -> u64 {
@@ -676,7 +684,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         let b = shape.basis;
         let extra: Vec<Vec<f64>> = shape
             .cols
-            .iter()
+            .par_iter()
             .map(|(_, g)| {
                 let m = p.samples.dwell_mean(g);
                 let gc: Vec<f64> = g.iter().map(|v| v - m).collect();

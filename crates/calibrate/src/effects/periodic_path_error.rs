@@ -5,6 +5,8 @@
 //! `h_k = dt_k (r * dK/daxis)(p_k)`, is a function of q; its periodogram's peaks give candidate
 //! periods; the linearised columns `-(dK/daxis) * D_{sin}`, `... D_{cos}` give a and b.
 
+use rayon::prelude::*;
+
 use crate::effects::{spectral_peaks, Candidate, Current};
 use crate::model::{Channel, Effect, Linear, Param, Problem};
 
@@ -205,17 +207,18 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     );
     // The two axes side by side (each through its own channel), collected x first.
     let per_axis = |axis_x: bool| -> Vec<Candidate> {
-        let mut out = Vec::new();
         let kern = if axis_x { Channel::Dx } else { Channel::Dy };
         let h = cur.matched(kern);
-        for coord in [Coord::X, Coord::Y, Coord::Arc, Coord::Time] {
+        // The coordinates side by side, collected in order.
+        let per_coord = |coord: Coord| -> Vec<Candidate> {
+            let mut out = Vec::new();
             let key = format!(
                 "periodic_path_error:{}:{}",
                 if axis_x { "x" } else { "y" },
                 coord.name()
             );
             if cur.has(&key) {
-                continue;
+                return out;
             }
             let q = coord.values(p);
             // A raster samples the coordinate across its lines only at the line spacing: a
@@ -256,8 +259,15 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
                     }),
                 });
             }
-        }
-        out
+            out
+        };
+        [Coord::X, Coord::Y, Coord::Arc, Coord::Time]
+            .into_par_iter()
+            .map(per_coord)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .flatten()
+            .collect()
     };
     let (mut x, y) = rayon::join(|| per_axis(true), || per_axis(false));
     x.extend(y);
