@@ -1291,13 +1291,19 @@ mod tests {
         assert!(dmax < 1e-9);
     }
 
-    #[test]
-    fn fast_and_exact_agree_on_a_raster() {
-        // A raster whose feed realises a dwell bump, so the removal has a shape (RMS ~ 10 %
-        // of its mean); a Gaussian truncated at 3 sigma, so the hard edge is exercised.
+    /// A 60 x 80 grid at 0.5 mm, a Gaussian truncated at 3 sigma, and a raster (lines every
+    /// 1.7 mm along X) whose feed realises a dwell bump: the grid, the TIF, the dwell grid, the
+    /// dwell density, the kinematic limits and the path.
+    fn bump_raster() -> (
+        Grid,
+        GaussianTif,
+        Grid,
+        Array2<f64>,
+        crate::path::kinematics::Limits,
+        PathLog,
+    ) {
         let grid = Grid::new(60, 80, 0.5, 0.5, 0.0, 0.0).unwrap();
         let g = GaussianTif::new(2.0, 12.0, 3.0).unwrap();
-        let tif = Tif::sample_antialiased(&g, 0.5, 0.5).unwrap();
         let dgrid = grid.grown(20, 20);
         let dens = Array2::from_shape_fn((dgrid.rows, dgrid.cols), |(i, j)| {
             let (x, y) = (dgrid.x_mm(j) - 20.0, dgrid.y_mm(i) - 15.0);
@@ -1306,6 +1312,15 @@ mod tests {
         let r = RasterSpec::over_rect((-6.0, 46.0), (-6.0, 36.0), 1.7, 2.0);
         let lim = crate::path::kinematics::Limits::default();
         let (p, _) = crate::path::kinematics::dwell_raster(&r, &dens, &dgrid, &lim, 0.2).unwrap();
+        (grid, g, dgrid, dens, lim, p)
+    }
+
+    #[test]
+    fn fast_and_exact_agree_on_a_raster() {
+        // A raster whose feed realises a dwell bump, so the removal has a shape (RMS ~ 10 %
+        // of its mean); a Gaussian truncated at 3 sigma, so the hard edge is exercised.
+        let (grid, g, dgrid, dens, lim, p) = bump_raster();
+        let tif = Tif::sample_antialiased(&g, 0.5, 0.5).unwrap();
         // Lines every 1.7 mm on 0.5 mm pixels: five sub-row phases, each with its own kernel.
         let fast = FastRemoval::from_field(&g, &grid)
             .unwrap()
@@ -1390,16 +1405,7 @@ mod tests {
         // full model's bits. The same raster wiggled across its lines (0.3 mm at a 7 mm period
         // along x): its phases spread, the full model shares the dwell between the fixed phase
         // nodes, screening splats it onto the centred kernels. Both against exact deposition.
-        let grid = Grid::new(60, 80, 0.5, 0.5, 0.0, 0.0).unwrap();
-        let g = GaussianTif::new(2.0, 12.0, 3.0).unwrap();
-        let dgrid = grid.grown(20, 20);
-        let dens = Array2::from_shape_fn((dgrid.rows, dgrid.cols), |(i, j)| {
-            let (x, y) = (dgrid.x_mm(j) - 20.0, dgrid.y_mm(i) - 15.0);
-            0.3 * (1.0 + 0.6 * (-(x * x + y * y) / 50.0).exp())
-        });
-        let r = RasterSpec::over_rect((-6.0, 46.0), (-6.0, 36.0), 1.7, 2.0);
-        let lim = crate::path::kinematics::Limits::default();
-        let (p, _) = crate::path::kinematics::dwell_raster(&r, &dens, &dgrid, &lim, 0.2).unwrap();
+        let (grid, g, _, _, _, p) = bump_raster();
         let run = |path: &PathLog, fidelity: Fidelity| {
             let mut f = FastRemoval::from_field(&g, &grid).unwrap();
             f.set_fidelity(fidelity);
