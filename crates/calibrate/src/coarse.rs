@@ -18,6 +18,7 @@
 //! refined on the full-resolution maps.
 
 use ndarray::Array2;
+use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 
 use bonnetlab_process::fft::{fast_len, Fft2};
@@ -106,13 +107,15 @@ fn corr_at(
 
 /// High-passed, windowed, 2x block-averaged map and its mask.
 fn prepare(a: &Array2<f64>, valid: &Array2<bool>) -> (Array2<f64>, Array2<bool>) {
-    let sm = smooth_masked(a, valid, HP_SIGMA_PX);
     // Window: a smooth taper of the mask (its own Gaussian smoothing), so the aperture edge
-    // does not dominate the correlation.
+    // does not dominate the correlation. Both smoothings side by side.
     let m = valid.mapv(|v| if v { 1.0 } else { 0.0 });
     let all = Array2::from_elem(valid.dim(), true);
-    let taper =
-        smooth_masked(&m, &all, 4.0 * HP_SIGMA_PX).mapv(|t| ((t - 0.5) * 2.0).clamp(0.0, 1.0));
+    let (sm, taper) = rayon::join(
+        || smooth_masked(a, valid, HP_SIGMA_PX),
+        || smooth_masked(&m, &all, 4.0 * HP_SIGMA_PX),
+    );
+    let taper = taper.mapv(|t| ((t - 0.5) * 2.0).clamp(0.0, 1.0));
     let (r, c) = a.dim();
     let (r2, c2) = (r / 2, c / 2);
     let mut out = Array2::zeros((r2, c2));
@@ -275,8 +278,7 @@ pub fn coarse_registration(
     if grid.rows < 32 || grid.cols < 32 {
         return None;
     }
-    let (b, bm) = prepare(before, bv);
-    let (a, am) = prepare(after, av);
+    let ((b, bm), (a, am)) = rayon::join(|| prepare(before, bv), || prepare(after, av));
     let corr = Correlator::new(&b);
     let aspect = grid.dy_mm / grid.dx_mm;
     let step = MAX_ANGLE_DEG.to_radians() / ANGLE_STEPS as f64;
@@ -290,8 +292,18 @@ pub fn coarse_registration(
         }
     };
     let best = |peaks: &[Slot]| best_of(&peaks.iter().map(|p| p.flatten()).collect::<Vec<_>>());
-    for k in (0..=2 * ANGLE_STEPS).step_by(COARSE_STRIDE) {
-        eval(k, &mut peaks);
+    // The first pass's angles side by side (each peak is the one `eval` gives).
+    let first: Vec<(usize, Slot)> = (0..=2 * ANGLE_STEPS)
+        .step_by(COARSE_STRIDE)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|k| {
+            let th = (k as f64 - ANGLE_STEPS as f64) * step;
+            (k, Some(corr.peak(&rotate(&a, th, aspect))))
+        })
+        .collect();
+    for (k, p) in first {
+        peaks[k] = p;
     }
     let (k0, _) = best(&peaks)?;
     for k in k0.saturating_sub(COARSE_STRIDE - 1)..=k0 + COARSE_STRIDE - 1 {

@@ -3,6 +3,7 @@
 
 use bonnetlab_process::interp::bilinear_clamped;
 use ndarray::Array2;
+use rayon::prelude::*;
 
 /// The map grid: the project's one grid type (`bonnetlab_surface::Grid`).
 pub use bonnetlab_surface::Grid as MapGrid;
@@ -26,37 +27,47 @@ pub fn smooth_masked(a: &Array2<f64>, valid: &Array2<bool>, sigma_px: f64) -> Ar
     let den0 = valid.mapv(|v| if v { 1.0 } else { 0.0 });
     // Separable passes over contiguous rows; every output sums its taps in ascending order
     // (the same sums as a tap-by-tap loop), with the taps clipped to the map once per pixel.
+    // Each output row is formed on its own (rows side by side: the same sums).
     let rows_pass = |m: &Array2<f64>| -> Array2<f64> {
         let mut out = Array2::zeros((r, c));
-        for (src, mut dst) in m.rows().into_iter().zip(out.rows_mut()) {
-            let src = src.as_slice().expect("standard layout");
-            for (j, d) in dst.iter_mut().enumerate() {
-                let lo = (j as isize - h).max(0) as usize;
-                let hi = (j as isize + h).min(c as isize - 1) as usize;
-                let w0 = (lo as isize - j as isize + h) as usize;
-                let mut s = 0.0;
-                for (x, wk) in src[lo..=hi].iter().zip(&w[w0..]) {
-                    s += wk * x;
+        let src_rows: Vec<_> = m.rows().into_iter().collect();
+        let dst_rows: Vec<_> = out.rows_mut().into_iter().collect();
+        src_rows
+            .into_par_iter()
+            .zip(dst_rows)
+            .for_each(|(src, mut dst)| {
+                let src = src.as_slice().expect("standard layout");
+                for (j, d) in dst.iter_mut().enumerate() {
+                    let lo = (j as isize - h).max(0) as usize;
+                    let hi = (j as isize + h).min(c as isize - 1) as usize;
+                    let w0 = (lo as isize - j as isize + h) as usize;
+                    let mut s = 0.0;
+                    for (x, wk) in src[lo..=hi].iter().zip(&w[w0..]) {
+                        s += wk * x;
+                    }
+                    *d = s;
                 }
-                *d = s;
-            }
-        }
+            });
         out
     };
     let cols_pass = |m: &Array2<f64>| -> Array2<f64> {
         let mut out = Array2::zeros((r, c));
         let src = m.as_slice().expect("standard layout");
-        for (i, mut dst) in out.rows_mut().into_iter().enumerate() {
-            let dst = dst.as_slice_mut().expect("standard layout");
-            let lo = (i as isize - h).max(0) as usize;
-            let hi = (i as isize + h).min(r as isize - 1) as usize;
-            for ii in lo..=hi {
-                let wk = w[(ii as isize - i as isize + h) as usize];
-                for (d, x) in dst.iter_mut().zip(&src[ii * c..(ii + 1) * c]) {
-                    *d += wk * x;
+        let dst_rows: Vec<_> = out.rows_mut().into_iter().collect();
+        dst_rows
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(i, mut dst)| {
+                let dst = dst.as_slice_mut().expect("standard layout");
+                let lo = (i as isize - h).max(0) as usize;
+                let hi = (i as isize + h).min(r as isize - 1) as usize;
+                for ii in lo..=hi {
+                    let wk = w[(ii as isize - i as isize + h) as usize];
+                    for (d, x) in dst.iter_mut().zip(&src[ii * c..(ii + 1) * c]) {
+                        *d += wk * x;
+                    }
                 }
-            }
-        }
+            });
         out
     };
     let pass = |m: &Array2<f64>, along_cols: bool| -> Array2<f64> {
@@ -66,8 +77,10 @@ pub fn smooth_masked(a: &Array2<f64>, valid: &Array2<bool>, sigma_px: f64) -> Ar
             cols_pass(m)
         }
     };
-    let num = pass(&pass(&num0, true), false);
-    let den = pass(&pass(&den0, true), false);
+    let (num, den) = rayon::join(
+        || pass(&pass(&num0, true), false),
+        || pass(&pass(&den0, true), false),
+    );
     Array2::from_shape_fn((r, c), |(i, j)| {
         let d = den[(i, j)];
         if d > 1e-9 {

@@ -676,8 +676,7 @@ impl MultiConvolver {
         origin: (usize, usize),
         shape: (usize, usize),
     ) -> Array2<f64> {
-        let hinted: Vec<(usize, ArrayView2<f64>, Option<&[bool]>)> =
-            inputs.iter().map(|(k, v)| (*k, v.view(), None)).collect();
+        let hinted: Vec<HintedInput> = inputs.iter().map(|(k, v)| (*k, v.view(), None)).collect();
         self.apply_sum_window_hinted(&hinted, origin, shape)
     }
 
@@ -688,7 +687,7 @@ impl MultiConvolver {
     /// faulting in, the pages of a large map it never touched.
     pub fn apply_sum_window_hinted(
         &mut self,
-        inputs: &[(usize, ArrayView2<f64>, Option<&[bool]>)],
+        inputs: &[HintedInput],
         origin: (usize, usize),
         shape: (usize, usize),
     ) -> Array2<f64> {
@@ -801,6 +800,10 @@ fn load_padded(real: &mut [f64], n1: usize, input: ArrayView2<f64>, rows: usize,
 /// Most live columns for which [`MultiConvolver::apply_sum`] transforms an input column by
 /// column ([`Fft2::forward_columns`]: per column about an eighth of a full transform's work).
 const MAX_SPARSE_COLUMNS: usize = 4;
+
+/// An input of [`MultiConvolver::apply_sum_window_hinted`]: kernel index, map, and the rows
+/// that may hold anything (`None`: all).
+pub type HintedInput<'a> = (usize, ArrayView2<'a, f64>, Option<&'a [bool]>);
 
 /// The indices of the columns of `input` that are not all zero, in `out`, when there are at
 /// most `max` of them (else `None`).

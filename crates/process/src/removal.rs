@@ -1009,7 +1009,7 @@ impl FastRemoval {
         // bits do not depend on the calls before it (which phases were built, and where).
         // Only the rows a map has dwell in are read (a large fresh map's other pages are never
         // touched).
-        let views: Vec<(usize, ArrayView2<f64>, Option<&[bool]>)> = maps
+        let views: Vec<crate::fft::HintedInput> = maps
             .iter()
             .enumerate()
             .filter_map(|(t, m)| m.as_ref().map(|a| (idx[t], a.view(), Some(&hit[t].0[..]))))
