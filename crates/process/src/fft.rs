@@ -62,6 +62,24 @@ impl std::fmt::Debug for Fft2 {
 
 const PAR_ROWS: usize = 16;
 
+/// The process's FFT planners (real and complex), shared: a length is planned once, and every
+/// later plan of it is the same `Arc` (the same algorithm, so the same bits as a fresh plan).
+static PLANNERS: std::sync::Mutex<Option<(RealFftPlanner<f64>, FftPlanner<f64>)>> =
+    std::sync::Mutex::new(None);
+
+/// Runs `f` with the shared planners.
+fn planned<T>(f: impl FnOnce(&mut RealFftPlanner<f64>, &mut FftPlanner<f64>) -> T) -> T {
+    // A panic inside a planner leaves nothing half-written that a later plan could see.
+    let mut g = PLANNERS.lock().unwrap_or_else(|e| e.into_inner());
+    let (rp, cp) = g.get_or_insert_with(|| (RealFftPlanner::new(), FftPlanner::new()));
+    f(rp, cp)
+}
+
+/// A forward real-to-complex transform of length `n`, planned once per process.
+pub fn real_forward(n: usize) -> Arc<dyn RealToComplex<f64>> {
+    planned(|rp, _| rp.plan_fft_forward(n.max(1)))
+}
+
 /// Transforms with fewer real samples than this run on the calling thread: below it, rayon's
 /// hand-offs (six fork-joins per transform pair) cost more than they gain on a shared 2-core
 /// machine (see reports/performance_process.md for the dwell-grid sizes).
@@ -71,16 +89,22 @@ impl Fft2 {
     pub fn new(n0: usize, n1: usize) -> Fft2 {
         let n0 = n0.max(1);
         let n1 = n1.max(1);
-        let mut rp = RealFftPlanner::<f64>::new();
-        let mut cp = FftPlanner::<f64>::new();
+        let (r2c, c2r, col_fwd, col_inv) = planned(|rp, cp| {
+            (
+                rp.plan_fft_forward(n1),
+                rp.plan_fft_inverse(n1),
+                cp.plan_fft_forward(n0),
+                cp.plan_fft_inverse(n0),
+            )
+        });
         Fft2 {
             n0,
             n1,
             nh: n1 / 2 + 1,
-            r2c: rp.plan_fft_forward(n1),
-            c2r: rp.plan_fft_inverse(n1),
-            col_fwd: cp.plan_fft_forward(n0),
-            col_inv: cp.plan_fft_inverse(n0),
+            r2c,
+            c2r,
+            col_fwd,
+            col_inv,
             row_twiddles: (0..n1)
                 .map(|m| {
                     let a = -2.0 * std::f64::consts::PI * m as f64 / n1 as f64;

@@ -133,8 +133,7 @@ pub fn spectral_peaks(q: &[f64], h: &[f64], p_min: f64, p_max: f64, n: usize) ->
         binned[b] += hk;
     }
     let nfft = bonnetlab_process::fft::fast_len(4 * nb);
-    let mut planner = realfft::RealFftPlanner::<f64>::new();
-    let fft = planner.plan_fft_forward(nfft);
+    let fft = bonnetlab_process::fft::real_forward(nfft);
     let mut input = vec![0.0; nfft];
     input[..nb].copy_from_slice(&binned);
     let mut out = fft.make_output_vec();
