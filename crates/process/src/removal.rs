@@ -526,10 +526,11 @@ pub enum Fidelity {
     Full,
     /// That dwell splatted cubically across its motion onto the motion's centred kernel: one
     /// map and one transform per motion instead of up to [`PHASE_NODES`]. The rim's sub-pixel
-    /// position is then interpolated, so the ripple at the raster pitch is a few per cent off,
-    /// while the removal's bulk and its smooth changes with a rate or a displacement are
-    /// unchanged: for screening many candidate columns, never for a reported removal. A path
-    /// whose lines keep a few phases is computed as in `Full`, to the bit.
+    /// position is then interpolated. Measured on a raster wiggled 0.3 mm at a 7 mm period
+    /// (test `screening_is_the_full_model_on_a_raster_and_one_kernel_per_motion_on_a_wiggled_path`):
+    /// 0.68 % of the removal RMS off exact deposition, against 0.10 % at `Full`, with 5
+    /// transforms instead of 33. For screening many candidate columns, never for a reported
+    /// removal. A path whose lines keep a few phases is computed as in `Full`, to the bit.
     Screening,
 }
 
