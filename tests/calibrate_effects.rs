@@ -6,7 +6,7 @@
 mod common;
 
 use bonnetlab::calibrate::run::Calibration;
-use bonnetlab::calibrate::synth::{Injected, SynthConfig, Waveform, WiggleCoord};
+use bonnetlab::calibrate::synth::{Injected, SynthConfig};
 use common::calibrate::{param, run, run_cfg, summary};
 
 fn within(got: f64, want: f64, rel: f64) -> bool {
@@ -123,17 +123,7 @@ fn finds_direction_lag() {
 
 #[test]
 fn finds_periodic_path_error() {
-    let c = run(
-        vec![Injected::PeriodicPathError {
-            axis_x: false,
-            amplitude_mm: 0.3,
-            period_mm: 12.0,
-            phase_rad: 0.5,
-            coord: WiggleCoord::X,
-            waveform: Waveform::Sine,
-        }],
-        15,
-    );
+    let c = run(vec![Injected::reference_wiggle()], 15);
     let e = &c.effects[0];
     assert_eq!(e.kind, "periodic_path_error", "{}", summary(&c));
     assert_eq!(e.params["axis"], "y");

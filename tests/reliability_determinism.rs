@@ -67,19 +67,12 @@ fn psd_json_is_byte_identical_across_runs() {
 #[test]
 fn calibrate_json_is_byte_identical_across_runs_and_thread_counts() {
     use bonnetlab::calibrate::synth::write::write_run;
-    use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig, Waveform, WiggleCoord};
+    use bonnetlab::calibrate::synth::{generate, Injected, SynthConfig};
     let dir = tempfile::tempdir().unwrap();
     let cfg = SynthConfig {
         seed: 15,
         effects: vec![
-            Injected::PeriodicPathError {
-                axis_x: false,
-                amplitude_mm: 0.3,
-                period_mm: 12.0,
-                phase_rad: 0.5,
-                coord: WiggleCoord::X,
-                waveform: Waveform::Sine,
-            },
+            Injected::reference_wiggle(),
             Injected::TifScale { scale: 1.1 },
         ],
         ..SynthConfig::default()

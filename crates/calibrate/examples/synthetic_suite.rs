@@ -16,7 +16,7 @@
 use std::time::Instant;
 
 use bonnetlab_calibrate::run::{calibrate, Options};
-use bonnetlab_calibrate::synth::{generate, Injected, SynthConfig, Waveform, WiggleCoord};
+use bonnetlab_calibrate::synth::{generate, Injected, SynthConfig};
 
 fn case(
     name: &str,
@@ -88,14 +88,7 @@ fn main() {
         case(
             "periodic path error y 0.3 mm / 12 mm",
             15,
-            vec![Injected::PeriodicPathError {
-                axis_x: false,
-                amplitude_mm: 0.3,
-                period_mm: 12.0,
-                phase_rad: 0.5,
-                coord: WiggleCoord::X,
-                waveform: Waveform::Sine,
-            }],
+            vec![Injected::reference_wiggle()],
             none,
         ),
         case(

@@ -21,14 +21,7 @@ fn main() {
         }],
         "scale" => vec![Injected::TifScale { scale: 1.12 }],
         "lag" => vec![Injected::DirectionLag { lag_mm: 0.4 }],
-        "wiggle" => vec![Injected::PeriodicPathError {
-            axis_x: false,
-            amplitude_mm: 0.3,
-            period_mm: 12.0,
-            phase_rad: 0.5,
-            coord: WiggleCoord::X,
-            waveform: Waveform::Sine,
-        }],
+        "wiggle" => vec![Injected::reference_wiggle()],
         "cov" => vec![Injected::RateCovariate {
             covariate: "height".into(),
             coefficient: 0.004,

@@ -146,6 +146,21 @@ pub enum Injected {
     },
 }
 
+impl Injected {
+    /// The wiggle of the project's synthetic suite and tests: the path displaced along y by
+    /// 0.3 mm, a sine of 12 mm period in x at phase 0.5 rad.
+    pub fn reference_wiggle() -> Injected {
+        Injected::PeriodicPathError {
+            axis_x: false,
+            amplitude_mm: 0.3,
+            period_mm: 12.0,
+            phase_rad: 0.5,
+            coord: WiggleCoord::X,
+            waveform: Waveform::Sine,
+        }
+    }
+}
+
 /// The true initial surface.
 #[derive(Debug, Clone, PartialEq)]
 pub enum InitialSurface {
