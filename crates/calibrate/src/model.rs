@@ -171,6 +171,8 @@ pub struct Problem {
     resampler: Resampler,
     resampled: ResampleCache,
     columns: Mutex<ColumnCache>,
+    /// Screening-fidelity columns (the candidates'), kept apart (see [`SCREENING_CACHE_BYTES`]).
+    screening: Mutex<ColumnCache>,
     coarse: std::sync::OnceLock<Option<crate::coarse::Coarse>>,
 }
 
@@ -180,32 +182,57 @@ type ResampleCache = Mutex<Vec<([f64; 3], Arc<(Array2<f64>, Array2<bool>)>)>>;
 /// kept, and at most 24 (enough for the scan of `tif_scale` and the scale the model sits at).
 const KERNEL_CACHE_BYTES: usize = 192 << 20;
 
-/// Bytes of columns kept between requests (see [`ColumnCache`]).
+/// Bytes of full-fidelity columns kept between requests (see [`ColumnCache`]).
 const COLUMN_CACHE_BYTES: usize = 128 << 20;
+
+/// Bytes of screening columns kept between requests: the selection's candidate columns, many
+/// of which each round asks for again (the same covariate, profile hat or shift on an unchanged
+/// path). At 800^2 a column is 5 MB, and the full-fidelity budget above held about 25: a
+/// round's 60-90 candidate columns pushed the previous round's out before they were asked for
+/// again, so the rate-profile, covariate, lag and offset candidates cost 170-200 ms each round
+/// instead of 2-13 ms. Kept apart from the full columns, which the refinements fill with
+/// one-off Jacobian columns.
+const SCREENING_CACHE_BYTES: usize = 512 << 20;
 
 /// Forward-model columns already computed, by a 128-bit fingerprint of everything they depend
 /// on: the executed path (times and positions), the TIF scale and each term's channel and rate
 /// weights. Selection rounds, candidates and refinement ask for the same column many times
 /// (the same covariate on an unchanged path, the baseline of every trial that moves only the
-/// registration); each is computed once. Oldest first out beyond [`COLUMN_CACHE_BYTES`].
-#[derive(Default)]
+/// registration); each is computed once. Least recently asked for first out beyond its budget
+/// (bytes).
 struct ColumnCache {
     map: std::collections::HashMap<u128, Arc<Vec<f64>>>,
     order: std::collections::VecDeque<u128>,
     bytes: usize,
+    budget: usize,
 }
 
 impl ColumnCache {
-    fn get(&self, key: u128) -> Option<Arc<Vec<f64>>> {
-        self.map.get(&key).cloned()
+    fn new(budget: usize) -> ColumnCache {
+        ColumnCache {
+            map: Default::default(),
+            order: Default::default(),
+            bytes: 0,
+            budget,
+        }
+    }
+
+    /// The column of `key`, if kept (it becomes the most recently asked for).
+    fn get(&mut self, key: u128) -> Option<Arc<Vec<f64>>> {
+        let hit = self.map.get(&key).cloned()?;
+        if let Some(at) = self.order.iter().position(|k| *k == key) {
+            self.order.remove(at);
+            self.order.push_back(key);
+        }
+        Some(hit)
     }
 
     fn put(&mut self, key: u128, col: Arc<Vec<f64>>) {
         let size = 8 * col.len();
-        if size > COLUMN_CACHE_BYTES || self.map.contains_key(&key) {
+        if size > self.budget || self.map.contains_key(&key) {
             return;
         }
-        while self.bytes + size > COLUMN_CACHE_BYTES {
+        while self.bytes + size > self.budget {
             let Some(old) = self.order.pop_front() else {
                 break;
             };
@@ -362,7 +389,8 @@ impl Problem {
             kernels: Mutex::new(Vec::new()),
             resampler,
             resampled: Mutex::new(Vec::new()),
-            columns: Mutex::new(ColumnCache::default()),
+            columns: Mutex::new(ColumnCache::new(COLUMN_CACHE_BYTES)),
+            screening: Mutex::new(ColumnCache::new(SCREENING_CACHE_BYTES)),
             coarse: std::sync::OnceLock::new(),
         })
     }
@@ -435,14 +463,18 @@ impl Problem {
             Fidelity::Screening => 0x5c3e_e2a1_97d4_0b6f_81f2_4c7a_d935_e068_u128,
         };
         let key = fingerprint(k.scale(), exec, terms) ^ salt;
-        if let Some(hit) = self.columns.lock().ok().and_then(|m| m.get(key)) {
+        let cache = match fidelity {
+            Fidelity::Full => &self.columns,
+            Fidelity::Screening => &self.screening,
+        };
+        if let Some(hit) = cache.lock().ok().and_then(|mut m| m.get(key)) {
             return Ok(hit.as_ref().clone());
         }
         let col = match terms {
             [(ch, g)] => self.compress(&k.removal_at(fidelity, *ch, exec, *g)?),
             _ => self.compress(&k.removal_sum_at(fidelity, exec, terms)?),
         };
-        if let Ok(mut m) = self.columns.lock() {
+        if let Ok(mut m) = cache.lock() {
             m.put(key, Arc::new(col.clone()));
         }
         Ok(col)
