@@ -201,8 +201,11 @@ const SCREENING_CACHE_BYTES: usize = 512 << 20;
 /// registration); each is computed once. Least recently asked for first out beyond its budget
 /// (bytes).
 struct ColumnCache {
-    map: std::collections::HashMap<u128, Arc<Vec<f64>>>,
-    order: std::collections::VecDeque<u128>,
+    /// Column and the stamp of its last request.
+    map: std::collections::HashMap<u128, (Arc<Vec<f64>>, u64)>,
+    /// Requests in order (key, stamp); an entry whose stamp is no longer its key's is stale.
+    order: std::collections::VecDeque<(u128, u64)>,
+    clock: u64,
     bytes: usize,
     budget: usize,
 }
@@ -212,6 +215,7 @@ impl ColumnCache {
         ColumnCache {
             map: Default::default(),
             order: Default::default(),
+            clock: 0,
             bytes: 0,
             budget,
         }
@@ -219,10 +223,16 @@ impl ColumnCache {
 
     /// The column of `key`, if kept (it becomes the most recently asked for).
     fn get(&mut self, key: u128) -> Option<Arc<Vec<f64>>> {
-        let hit = self.map.get(&key).cloned()?;
-        if let Some(at) = self.order.iter().position(|k| *k == key) {
-            self.order.remove(at);
-            self.order.push_back(key);
+        self.clock += 1;
+        let (col, stamp) = self.map.get_mut(&key)?;
+        *stamp = self.clock;
+        let hit = col.clone();
+        self.order.push_back((key, self.clock));
+        // Stale entries dropped once they outnumber the live ones.
+        if self.order.len() > 2 * self.map.len() + 64 {
+            let map = &self.map;
+            self.order
+                .retain(|(k, t)| map.get(k).is_some_and(|e| e.1 == *t));
         }
         Some(hit)
     }
@@ -233,16 +243,19 @@ impl ColumnCache {
             return;
         }
         while self.bytes + size > self.budget {
-            let Some(old) = self.order.pop_front() else {
+            let Some((old, t)) = self.order.pop_front() else {
                 break;
             };
-            if let Some(c) = self.map.remove(&old) {
-                self.bytes -= 8 * c.len();
+            if self.map.get(&old).is_some_and(|e| e.1 == t) {
+                if let Some((c, _)) = self.map.remove(&old) {
+                    self.bytes -= 8 * c.len();
+                }
             }
         }
+        self.clock += 1;
         self.bytes += size;
-        self.order.push_back(key);
-        self.map.insert(key, col);
+        self.order.push_back((key, self.clock));
+        self.map.insert(key, (col, self.clock));
     }
 }
 
@@ -845,6 +858,31 @@ impl Eval {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn column_cache_drops_the_least_recently_asked_for_first() {
+        // Budget for three columns of 4 values; 1 is asked for again before 4 comes in, so 2
+        // (the least recently asked for) goes, then 3 when 5 comes.
+        let mut c = ColumnCache::new(3 * 32);
+        let col = |v: f64| Arc::new(vec![v; 4]);
+        for k in 1..=3u128 {
+            c.put(k, col(k as f64));
+        }
+        for _ in 0..200 {
+            assert_eq!(c.get(1).unwrap()[0], 1.0);
+        }
+        c.put(4, col(4.0));
+        assert!(c.get(2).is_none());
+        assert!(c.get(1).is_some() && c.get(3).is_some() && c.get(4).is_some());
+        c.put(5, col(5.0));
+        assert!(
+            c.get(1).is_none(),
+            "1 was asked for before 3 and 4 in the last pass"
+        );
+        assert_eq!(c.get(5).unwrap()[0], 5.0);
+        assert_eq!(c.bytes, 3 * 32);
+        assert!(c.order.len() <= 2 * c.map.len() + 64);
+    }
 
     fn of(v: &[f64]) -> u128 {
         let mut h = Fingerprint::new();
