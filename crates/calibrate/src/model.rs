@@ -201,8 +201,8 @@ const SCREENING_CACHE_BYTES: usize = 512 << 20;
 /// registration); each is computed once. Least recently asked for first out beyond its budget
 /// (bytes).
 struct ColumnCache {
-    /// Column and the stamp of its last request.
-    map: std::collections::HashMap<u128, (Arc<Vec<f64>>, u64)>,
+    /// Column, whether it is the same at either fidelity, and the stamp of its last request.
+    map: std::collections::HashMap<u128, (Arc<Vec<f64>>, bool, u64)>,
     /// Requests in order (key, stamp); an entry whose stamp is no longer its key's is stale.
     order: std::collections::VecDeque<(u128, u64)>,
     clock: u64,
@@ -221,23 +221,24 @@ impl ColumnCache {
         }
     }
 
-    /// The column of `key`, if kept (it becomes the most recently asked for).
-    fn get(&mut self, key: u128) -> Option<Arc<Vec<f64>>> {
+    /// The column of `key` and whether it is the same at either fidelity, if kept (it becomes
+    /// the most recently asked for).
+    fn get(&mut self, key: u128) -> Option<(Arc<Vec<f64>>, bool)> {
         self.clock += 1;
-        let (col, stamp) = self.map.get_mut(&key)?;
+        let (col, free, stamp) = self.map.get_mut(&key)?;
         *stamp = self.clock;
-        let hit = col.clone();
+        let hit = (col.clone(), *free);
         self.order.push_back((key, self.clock));
         // Stale entries dropped once they outnumber the live ones.
         if self.order.len() > 2 * self.map.len() + 64 {
             let map = &self.map;
             self.order
-                .retain(|(k, t)| map.get(k).is_some_and(|e| e.1 == *t));
+                .retain(|(k, t)| map.get(k).is_some_and(|e| e.2 == *t));
         }
         Some(hit)
     }
 
-    fn put(&mut self, key: u128, col: Arc<Vec<f64>>) {
+    fn put(&mut self, key: u128, col: Arc<Vec<f64>>, free: bool) {
         let size = 8 * col.len();
         if size > self.budget || self.map.contains_key(&key) {
             return;
@@ -246,8 +247,8 @@ impl ColumnCache {
             let Some((old, t)) = self.order.pop_front() else {
                 break;
             };
-            if self.map.get(&old).is_some_and(|e| e.1 == t) {
-                if let Some((c, _)) = self.map.remove(&old) {
+            if self.map.get(&old).is_some_and(|e| e.2 == t) {
+                if let Some((c, _, _)) = self.map.remove(&old) {
                     self.bytes -= 8 * c.len();
                 }
             }
@@ -255,7 +256,7 @@ impl ColumnCache {
         self.clock += 1;
         self.bytes += size;
         self.order.push_back((key, self.clock));
-        self.map.insert(key, (col, self.clock));
+        self.map.insert(key, (col, free, self.clock));
     }
 }
 
@@ -471,24 +472,29 @@ impl Problem {
         exec: &PathLog,
         terms: &[(Channel, Option<&[f64]>)],
     ) -> Result<Vec<f64>, CalibrateError> {
-        let salt = match fidelity {
-            Fidelity::Full => 0,
-            Fidelity::Screening => 0x5c3e_e2a1_97d4_0b6f_81f2_4c7a_d935_e068_u128,
+        const SCREENING_SALT: u128 = 0x5c3e_e2a1_97d4_0b6f_81f2_4c7a_d935_e068;
+        let base = fingerprint(k.scale(), exec, terms);
+        let (full_key, screening_key) = (base, base ^ SCREENING_SALT);
+        let (key, cache, other_key, other) = match fidelity {
+            Fidelity::Full => (full_key, &self.columns, screening_key, &self.screening),
+            Fidelity::Screening => (screening_key, &self.screening, full_key, &self.columns),
         };
-        let key = fingerprint(k.scale(), exec, terms) ^ salt;
-        let cache = match fidelity {
-            Fidelity::Full => &self.columns,
-            Fidelity::Screening => &self.screening,
-        };
-        if let Some(hit) = cache.lock().ok().and_then(|mut m| m.get(key)) {
+        if let Some((hit, _)) = cache.lock().ok().and_then(|mut m| m.get(key)) {
             return Ok(hit.as_ref().clone());
         }
-        let col = match terms {
-            [(ch, g)] => self.compress(&k.removal_at(fidelity, *ch, exec, *g)?),
-            _ => self.compress(&k.removal_sum_at(fidelity, exec, terms)?),
+        // A path without spread lines gives the same bits at either fidelity, so the other
+        // fidelity's column answers (a candidate's screening columns are the ones its
+        // refinement asks for at full fidelity).
+        if let Some((hit, true)) = other.lock().ok().and_then(|mut m| m.get(other_key)) {
+            return Ok(hit.as_ref().clone());
+        }
+        let (map, free) = match terms {
+            [(ch, g)] => k.removal_checked(fidelity, *ch, exec, *g)?,
+            _ => k.removal_sum_checked(fidelity, exec, terms)?,
         };
+        let col = self.compress(&map);
         if let Ok(mut m) = cache.lock() {
-            m.put(key, Arc::new(col.clone()));
+            m.put(key, Arc::new(col.clone()), free);
         }
         Ok(col)
     }
@@ -866,20 +872,20 @@ mod tests {
         let mut c = ColumnCache::new(3 * 32);
         let col = |v: f64| Arc::new(vec![v; 4]);
         for k in 1..=3u128 {
-            c.put(k, col(k as f64));
+            c.put(k, col(k as f64), true);
         }
         for _ in 0..200 {
-            assert_eq!(c.get(1).unwrap()[0], 1.0);
+            assert_eq!(c.get(1).unwrap().0[0], 1.0);
         }
-        c.put(4, col(4.0));
+        c.put(4, col(4.0), true);
         assert!(c.get(2).is_none());
         assert!(c.get(1).is_some() && c.get(3).is_some() && c.get(4).is_some());
-        c.put(5, col(5.0));
+        c.put(5, col(5.0), false);
         assert!(
             c.get(1).is_none(),
             "1 was asked for before 3 and 4 in the last pass"
         );
-        assert_eq!(c.get(5).unwrap()[0], 5.0);
+        assert_eq!(c.get(5).unwrap(), (col(5.0), false));
         assert_eq!(c.bytes, 3 * 32);
         assert!(c.order.len() <= 2 * c.map.len() + 64);
     }

@@ -380,6 +380,14 @@ const SCAN_SKIP_RATIO: f64 = 0.1;
 
 /// Runs the whole calibration on a prepared problem.
 pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateError> {
+    let start = std::time::Instant::now();
+    let trace = std::env::var_os("BONNETLAB_TRACE").is_some();
+    // Stage times since the start (with BONNETLAB_TRACE set).
+    let stage = |what: &str| {
+        if trace {
+            eprintln!("[{:?} since the start] {what}", start.elapsed());
+        }
+    };
     let mut effects: Vec<Box<dyn Effect>> = Vec::new();
     let (mut ev, mut f) = refine(p, &mut effects, 0)?;
     if f.n < 64.0 {
@@ -427,7 +435,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     let mut accepted: Vec<(String, f64, f64, Score)> = Vec::new(); // key, rms before, rms after, score
     let mut blocked: Vec<String> = Vec::new();
     let mut alternatives: Vec<(String, Vec<Alternative>)> = Vec::new();
-    let trace = std::env::var_os("BONNETLAB_TRACE").is_some();
+    stage("set-up (fit without effects, floor, hold-out split)");
     let t0 = std::time::Instant::now();
     // What the model can be trusted to: the noise floor and the forward model's own accuracy
     // (MODEL_ACCURACY of the measured removal) in quadrature. A residual at or below it has
@@ -622,6 +630,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         ev = ev_t;
         f = f_t;
     }
+    stage("selection rounds");
     // Every acceptance already refined all accepted effects jointly; refit only when the
     // backward check dropped one.
     let before_prune = effects.len();
@@ -639,6 +648,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             f = f2;
         }
     }
+    stage("backward check");
     // The registration's texture bias taken out of the estimate (extrapolated to a Jacobian
     // of no smoothing, see `uncertainty::registration_texture_step`), the linear terms refit.
     if let Some(step) = crate::uncertainty::registration_texture_step(p, &effects, &ev, &f)? {
@@ -653,14 +663,17 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         ev = e2;
         f = f2;
     }
+    stage("registration texture step");
     let lin = ev.linear(&f);
     maps.effect_removal_nm = effect_removals(p, &effects, &ev, &f)?;
+    stage("effect removals");
     let (sig, corr) = if effects.is_empty() {
         (Vec::new(), Vec::new())
     } else {
         crate::uncertainty::uncertainties_and_correlations(p, &effects, &ev, &f, &sp)
             .unwrap_or_default()
     };
+    stage("uncertainties");
     // Names of the flat numeric parameters (the order of `sig`), with their effect's index.
     let mut flat_names: Vec<(usize, String)> = Vec::new();
     let mut k = 0;
@@ -731,6 +744,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     let bands = band.split(&p.grid, &rmap, &rmask, noise);
     let unexplained = unexplained::find_by_band(&p.grid, &band, &rmap, &rmask, noise, &bands);
     maps.final_residual_nm = Some((rmap, rmask));
+    stage("floor, bands and unexplained");
     Ok(Calibration {
         baseline,
         final_: Final {

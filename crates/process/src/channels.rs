@@ -156,12 +156,25 @@ impl Channels {
         path: &PathLog,
         weights: Option<&[f64]>,
     ) -> Result<Array2<f64>, ProcessError> {
+        self.removal_checked(fidelity, ch, path, weights)
+            .map(|(out, _)| out)
+    }
+
+    /// [`Self::removal_at`] and whether its result is the same at either [`Fidelity`] (the
+    /// path has no motion whose lines spread: see [`FastRemoval::fidelity_free`]).
+    pub fn removal_checked(
+        &self,
+        fidelity: Fidelity,
+        ch: Channel,
+        path: &PathLog,
+        weights: Option<&[f64]>,
+    ) -> Result<(Array2<f64>, bool), ProcessError> {
         let mut ws = self.workspace(ch)?;
         let w = ws.get();
         w.set_fidelity(fidelity);
         let out = w.removal(path, weights);
         w.set_fidelity(Fidelity::Full);
-        out
+        out.map(|o| (o, w.fidelity_free()))
     }
 
     /// Sum of several channels' removals of the same path, each with its own weights.
@@ -180,11 +193,25 @@ impl Channels {
         path: &PathLog,
         terms: &[(Channel, Option<&[f64]>)],
     ) -> Result<Array2<f64>, ProcessError> {
+        self.removal_sum_checked(fidelity, path, terms)
+            .map(|(out, _)| out)
+    }
+
+    /// [`Self::removal_sum_at`] and whether its result is the same at either [`Fidelity`].
+    pub fn removal_sum_checked(
+        &self,
+        fidelity: Fidelity,
+        path: &PathLog,
+        terms: &[(Channel, Option<&[f64]>)],
+    ) -> Result<(Array2<f64>, bool), ProcessError> {
         let mut out = Array2::zeros((self.grid.rows, self.grid.cols));
+        let mut free = true;
         for (ch, w) in terms {
-            out += &self.removal_at(fidelity, *ch, path, *w)?;
+            let (r, f) = self.removal_checked(fidelity, *ch, path, *w)?;
+            out += &r;
+            free &= f;
         }
-        Ok(out)
+        Ok((out, free))
     }
 
     /// Matched filter of a map on the grid (0 off its aperture) through channel `ch`: at every

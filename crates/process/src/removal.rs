@@ -646,6 +646,17 @@ impl FastRemoval {
         self.fidelity = fidelity;
     }
 
+    /// Whether the last path this workspace walked gives the same removal, bit for bit, at
+    /// either [`Fidelity`]: none of its motions has spread lines (fidelity only decides where a
+    /// spread motion's dwell goes). False before any removal.
+    pub fn fidelity_free(&self) -> bool {
+        self.walked.is_some()
+            && self
+                .walk_phases
+                .iter()
+                .all(|l| matches!(l, Lines::Phases(_)))
+    }
+
     /// Shares kernel spectra with other workspaces of the same field on the same grid (each
     /// kernel is then built by one of them only).
     pub fn share_spectra(&mut self, shared: SharedSpectra) {
@@ -1431,19 +1442,27 @@ mod tests {
         let run = |path: &PathLog, fidelity: Fidelity| {
             let mut f = FastRemoval::from_field(&g, &grid).unwrap();
             f.set_fidelity(fidelity);
+            assert!(!f.fidelity_free(), "nothing walked yet");
             let out = f.removal(path, None).unwrap();
-            (out, f.fft_count(), f.phase_kernel_builds())
+            (
+                out,
+                f.fft_count(),
+                f.phase_kernel_builds(),
+                f.fidelity_free(),
+            )
         };
-        let (full, _, builds) = run(&p, Fidelity::Full);
-        let (screen, _, _) = run(&p, Fidelity::Screening);
+        let (full, _, builds, free) = run(&p, Fidelity::Full);
+        let (screen, _, _, _) = run(&p, Fidelity::Screening);
         assert!(builds >= 3, "{builds}");
+        assert!(free, "a raster's lines keep their phases");
         assert_eq!(full, screen);
         let mut q = p.clone();
         for (y, x) in q.y_mm.iter_mut().zip(&p.x_mm) {
             *y += 0.3 * (2.0 * std::f64::consts::PI * x / 7.0).sin();
         }
-        let (full, full_ffts, _) = run(&q, Fidelity::Full);
-        let (screen, screen_ffts, _) = run(&q, Fidelity::Screening);
+        let (full, full_ffts, _, free) = run(&q, Fidelity::Full);
+        let (screen, screen_ffts, _, _) = run(&q, Fidelity::Screening);
+        assert!(!free, "the wiggled raster's lines spread");
         let exact = deposit_exact(&q, &g, &grid, None, &ExactOptions::default()).unwrap();
         let mean = exact.mean().unwrap();
         let drms = |a: &Array2<f64>, b: &Array2<f64>| {
