@@ -109,6 +109,9 @@ pub struct Resampler {
     grid: MapGrid,
     filled: Array2<f64>,
     valid: Array2<bool>,
+    /// Whether the 4 x 4 neighbourhood `(i - 1 ..= i + 2, j - 1 ..= j + 2)` of each pixel is on
+    /// the map and valid (what [`Self::mapped_validity`] asks of a mapped point's cell).
+    valid4: Array2<bool>,
     rows: LineShift,
     cols: LineShift,
 }
@@ -177,6 +180,7 @@ impl Resampler {
             grid: *grid,
             filled: fill_gaps(after, valid),
             valid: valid.clone(),
+            valid4: neighbourhoods_valid(valid),
             rows: LineShift::new(grid.cols),
             cols: LineShift::new(grid.rows),
         }
@@ -229,9 +233,24 @@ impl Resampler {
             if i0 < 1 || j0 < 1 || i0 + 2 >= r || j0 + 2 >= cc {
                 return false;
             }
-            (-1..3).all(|a| (-1..3).all(|b| self.valid[((i0 + a) as usize, (j0 + b) as usize)]))
+            self.valid4[(i0 as usize, j0 as usize)]
         })
     }
+}
+
+/// For each pixel (i, j): whether `(i - 1 ..= i + 2, j - 1 ..= j + 2)` is on the map and valid
+/// (a 4-wide window along each row, then down each column).
+fn neighbourhoods_valid(valid: &Array2<bool>) -> Array2<bool> {
+    let (r, c) = valid.dim();
+    let window = |i: usize, j: usize, f: &dyn Fn(usize, usize) -> bool, along_row: bool| {
+        let (k, n) = if along_row { (j, c) } else { (i, r) };
+        if k < 1 || k + 2 >= n {
+            return false;
+        }
+        (k - 1..=k + 2).all(|m| if along_row { f(i, m) } else { f(m, j) })
+    };
+    let rows = Array2::from_shape_fn((r, c), |(i, j)| window(i, j, &|a, b| valid[(a, b)], true));
+    Array2::from_shape_fn((r, c), |(i, j)| window(i, j, &|a, b| rows[(a, b)], false))
 }
 
 #[cfg(test)]
@@ -297,6 +316,24 @@ mod tests {
         let vh = var([0.5, 0.5, 0.0]);
         // Bicubic would keep 0.41 of it at (0.5, 0.5) px.
         assert!((vh / v0 - 1.0).abs() < 0.01, "v0 {v0} v(0.5,0.5) {vh}");
+    }
+
+    #[test]
+    fn neighbourhood_validity_is_the_four_by_four_rule() {
+        let (r, c) = (23, 31);
+        let valid = Array2::from_shape_fn((r, c), |(i, j)| (i * 7 + j * 13) % 17 != 0);
+        let fast = neighbourhoods_valid(&valid);
+        for i in 0..r {
+            for j in 0..c {
+                let want = i >= 1
+                    && j >= 1
+                    && i + 2 < r
+                    && j + 2 < c
+                    && (i - 1..=i + 2).all(|a| (j - 1..=j + 2).all(|b| valid[(a, b)]));
+                assert_eq!(fast[(i, j)], want, "({i}, {j})");
+            }
+        }
+        assert!(fast.iter().any(|v| *v) && fast.iter().any(|v| !*v));
     }
 
     #[test]
