@@ -457,6 +457,7 @@ fn signal(
         ev: &ev,
         resid: &f.resid,
         accepted: &[],
+        matched_cache: Default::default(),
     };
     let mut out = format!(
         "{:.3} nm = {:.2} x floor;",

@@ -451,6 +451,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             ev: &ev,
             resid: &f.resid,
             accepted: &effects,
+            matched_cache: Default::default(),
         };
         let cands: Vec<_> = candidates(&cur)
             .into_iter()

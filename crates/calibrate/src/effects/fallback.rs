@@ -566,7 +566,8 @@ fn flipped_matched(cur: &Current) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
         .into_par_iter()
         .map(|f| {
             if f == 0 {
-                return run(&r);
+                // The residual's own: the rate channel's matched filter of this state.
+                return Some(cur.matched(Channel::Value));
             }
             let mut m = r.clone();
             for ((i, j), v) in m.indexed_iter_mut() {

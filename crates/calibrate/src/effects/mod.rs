@@ -53,7 +53,16 @@ pub struct Current<'a> {
     /// Current residual on the analysis pixels.
     pub resid: &'a [f64],
     pub accepted: &'a [Box<dyn Effect>],
+    /// Matched filters already computed for this state (see [`Self::matched`]).
+    pub matched_cache: MatchedCache,
 }
+
+/// Matched filters of one state by channel: several kinds ask for the same one in a round
+/// (the rate channel's by the oscillation, the step and the fallback). Never waited on: two
+/// callers that miss at once both compute it (a caller waiting for another could be the thread
+/// that other one's parallel transform is waiting for).
+#[derive(Default)]
+pub struct MatchedCache(std::sync::Mutex<Vec<(Channel, std::sync::Arc<Vec<f64>>)>>);
 
 impl Current<'_> {
     pub fn has(&self, key: &str) -> bool {
@@ -70,6 +79,23 @@ impl Current<'_> {
     /// forward model's channel `ch` (K' = the TIF or one of its derivatives). A channel that
     /// cannot be evaluated gives zeros (no candidate can come of it).
     pub fn matched(&self, ch: Channel) -> Vec<f64> {
+        let known = |c: &MatchedCache| {
+            let v = c.0.lock().ok()?;
+            v.iter().find(|(k, _)| *k == ch).map(|(_, h)| h.clone())
+        };
+        if let Some(h) = known(&self.matched_cache) {
+            return h.as_ref().clone();
+        }
+        let h = self.matched_uncached(ch);
+        if let Ok(mut v) = self.matched_cache.0.lock() {
+            if !v.iter().any(|(k, _)| *k == ch) {
+                v.push((ch, std::sync::Arc::new(h.clone())));
+            }
+        }
+        h
+    }
+
+    fn matched_uncached(&self, ch: Channel) -> Vec<f64> {
         let r = self.resid_map();
         let h = self.ev.kernels.matched(ch, &r, &self.ev.exec).ok();
         match h {
