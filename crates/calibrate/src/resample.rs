@@ -22,8 +22,8 @@ use std::sync::Arc;
 
 use ndarray::Array2;
 use rayon::prelude::*;
-use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
 use rustfft::num_complex::Complex64;
+use rustfft::Fft;
 
 use crate::grid::MapGrid;
 
@@ -34,70 +34,107 @@ struct LineShift {
     /// length's Nyquist bin can only be scaled by cos(pi s) and loses 1 / (2n) of white-noise
     /// power at half a pixel, enough to bias a registration on 800 x 800 maps).
     len: usize,
-    r2c: Arc<dyn RealToComplex<f64>>,
-    c2r: Arc<dyn ComplexToReal<f64>>,
+    fwd: Arc<dyn Fft<f64>>,
+    inv: Arc<dyn Fft<f64>>,
 }
 
 impl LineShift {
     fn new(n: usize) -> Self {
         let len = bonnetlab_process::fft::smooth_len(2 * n, &[3, 5, 7], true);
-        let mut p = RealFftPlanner::<f64>::new();
-        LineShift {
-            n,
-            len,
-            r2c: p.plan_fft_forward(len),
-            c2r: p.plan_fft_inverse(len),
-        }
+        let (fwd, inv) = bonnetlab_process::fft::complex_pair(len);
+        LineShift { n, len, fwd, inv }
     }
 
     /// Shifts every line of `lines` (rows of a row-major buffer of `n` columns) in place:
     /// `line[j] <- f(j + shift(line index))`, f the band-limited interpolant of the extended line.
+    ///
+    /// Two lines go through one complex transform, one as its real part and one as its
+    /// imaginary part (a real-input transform of odd length costs a complex one, so this halves
+    /// the work): their spectra are told apart by their Hermitian symmetry, each takes its own
+    /// phase ramp, and the inverse gives the first line shifted in its real part and the second
+    /// in its imaginary part. A line whose shift is zero is left as it is.
     fn apply(&self, lines: &mut [f64], shift: &(dyn Fn(usize) -> f64 + Sync)) {
-        let n = self.n;
-        lines.par_chunks_mut(n).enumerate().for_each_init(
+        let (n, m) = (self.n, self.len);
+        let zero = Complex64::new(0.0, 0.0);
+        lines.par_chunks_mut(2 * n).enumerate().for_each_init(
             || {
                 (
-                    vec![0.0; self.len],
-                    self.r2c.make_output_vec(),
-                    self.r2c.make_scratch_vec(),
-                    self.c2r.make_scratch_vec(),
+                    vec![zero; m],
+                    vec![zero; self.fwd.get_inplace_scratch_len()],
+                    vec![zero; self.inv.get_inplace_scratch_len()],
                 )
             },
-            |(buf, spec, s1, s2), (li, line)| {
-                let s = shift(li);
-                if s == 0.0 {
+            |(buf, s1, s2), (pi, pair)| {
+                let (first, second) = pair.split_at_mut(n);
+                let sa = shift(2 * pi);
+                let sb = if second.is_empty() {
+                    0.0
+                } else {
+                    shift(2 * pi + 1)
+                };
+                if sa == 0.0 && sb == 0.0 {
                     return;
                 }
                 // Mirror, then hold the first value until the period closes: continuous at
-                // both joins.
-                buf[..n].copy_from_slice(line);
-                for j in 0..n {
-                    buf[2 * n - 1 - j] = line[j];
+                // both joins. The second line (zero when there is none) is the imaginary part.
+                let extended = |line: &[f64], j: usize| -> f64 {
+                    if line.is_empty() {
+                        0.0
+                    } else if j < n {
+                        line[j]
+                    } else if j < 2 * n {
+                        line[2 * n - 1 - j]
+                    } else {
+                        line[0]
+                    }
+                };
+                for (j, b) in buf.iter_mut().enumerate() {
+                    *b = Complex64::new(extended(first, j), extended(second, j));
                 }
-                buf[2 * n..].fill(line[0]);
-                if self.r2c.process_with_scratch(buf, spec, s1).is_err() {
-                    return;
+                self.fwd.process_with_scratch(buf, s1);
+                // Phase ramps exp(2 pi i s k / m) for k = 0 ..= (m - 1) / 2 (recurrence,
+                // re-anchored every 64 steps against rounding drift); the negative
+                // frequencies m - k take the conjugates.
+                let ramp = |s: f64, k: usize, ph: &mut Complex64, rot: Complex64| {
+                    if k > 0 {
+                        *ph *= rot;
+                        if k % 64 == 0 {
+                            let a = 2.0 * std::f64::consts::PI * s * k as f64 / m as f64;
+                            *ph = Complex64::new(a.cos(), a.sin());
+                        }
+                    }
+                };
+                let rot_of = |s: f64| {
+                    let a = 2.0 * std::f64::consts::PI * s / m as f64;
+                    Complex64::new(a.cos(), a.sin())
+                };
+                let (ra, rb) = (rot_of(sa), rot_of(sb));
+                let (mut pa, mut pb) = (Complex64::new(1.0, 0.0), Complex64::new(1.0, 0.0));
+                let i = Complex64::new(0.0, 1.0);
+                // DC: the first line's mean in the real part, the second's in the imaginary
+                // part; a shift leaves both.
+                for k in 1..=(m - 1) / 2 {
+                    ramp(sa, k, &mut pa, ra);
+                    ramp(sb, k, &mut pb, rb);
+                    let (zk, zj) = (buf[k], buf[m - k]);
+                    // The two lines' spectra at k (at m - k they are the conjugates).
+                    let a = (zk + zj.conj()) * 0.5;
+                    let b = (zk - zj.conj()) * Complex64::new(0.0, -0.5);
+                    let (a, b) = (a * pa, b * pb);
+                    buf[k] = a + i * b;
+                    buf[m - k] = a.conj() + i * b.conj();
                 }
-                let m = self.len;
-                let step = 2.0 * std::f64::consts::PI * s / m as f64;
-                let rot = Complex64::new(step.cos(), step.sin());
-                let mut ph = Complex64::new(1.0, 0.0);
-                for (k, v) in spec.iter_mut().enumerate() {
-                    *v *= ph;
-                    ph *= rot;
-                    if k % 64 == 63 {
-                        // Re-anchor the recurrence against rounding drift.
-                        let a = step * (k + 1) as f64;
-                        ph = Complex64::new(a.cos(), a.sin());
+                self.inv.process_with_scratch(buf, s2);
+                let inv = 1.0 / m as f64;
+                if sa != 0.0 {
+                    for (o, b) in first.iter_mut().zip(buf.iter()) {
+                        *o = b.re * inv;
                     }
                 }
-                spec[0].im = 0.0;
-                if self.c2r.process_with_scratch(spec, buf, s2).is_err() {
-                    return;
-                }
-                let inv = 1.0 / m as f64;
-                for (o, b) in line.iter_mut().zip(buf.iter()) {
-                    *o = b * inv;
+                if sb != 0.0 {
+                    for (o, b) in second.iter_mut().zip(buf.iter()) {
+                        *o = b.im * inv;
+                    }
                 }
             },
         );
@@ -334,6 +371,75 @@ mod tests {
             }
         }
         assert!(fast.iter().any(|v| *v) && fast.iter().any(|v| !*v));
+    }
+
+    #[test]
+    fn paired_lines_are_each_shifted_as_by_a_direct_transform() {
+        // Five lines (two pairs and one alone) of 12 samples, each with its own shift, one of
+        // them zero; against the direct O(m^2) transform of each extended line.
+        let n = 12;
+        let ls = LineShift::new(n);
+        let m = ls.len;
+        let shifts = [0.37, -1.25, 0.0, 2.6, -0.5];
+        let mut rng = bonnetlab_surface::rng::Rng::new(11);
+        let orig: Vec<f64> = (0..shifts.len() * n).map(|_| rng.normal()).collect();
+        let mut got = orig.clone();
+        ls.apply(&mut got, &|li| shifts[li]);
+        let two_pi = 2.0 * std::f64::consts::PI;
+        for (li, &s) in shifts.iter().enumerate() {
+            let line = &orig[li * n..(li + 1) * n];
+            let e: Vec<f64> = (0..m)
+                .map(|j| {
+                    if j < n {
+                        line[j]
+                    } else if j < 2 * n {
+                        line[2 * n - 1 - j]
+                    } else {
+                        line[0]
+                    }
+                })
+                .collect();
+            let spec: Vec<Complex64> = (0..m)
+                .map(|k| {
+                    let f = if k <= (m - 1) / 2 {
+                        k as f64
+                    } else {
+                        k as f64 - m as f64
+                    };
+                    let x: Complex64 = e
+                        .iter()
+                        .enumerate()
+                        .map(|(j, v)| {
+                            Complex64::from_polar(*v, -two_pi * (j * k) as f64 / m as f64)
+                        })
+                        .sum();
+                    x * Complex64::from_polar(1.0, two_pi * s * f / m as f64)
+                })
+                .collect();
+            for j in 0..n {
+                let want = if s == 0.0 {
+                    line[j]
+                } else {
+                    spec.iter()
+                        .enumerate()
+                        .map(|(k, y)| {
+                            (y * Complex64::from_polar(1.0, two_pi * (j * k) as f64 / m as f64)).re
+                        })
+                        .sum::<f64>()
+                        / m as f64
+                };
+                let g = got[li * n + j];
+                assert!(
+                    (g - want).abs() < 1e-12,
+                    "line {li} sample {j}: {g} vs {want}"
+                );
+            }
+        }
+        assert_eq!(
+            got[2 * n..3 * n],
+            orig[2 * n..3 * n],
+            "a zero shift leaves its line"
+        );
     }
 
     #[test]

@@ -80,6 +80,12 @@ pub fn real_forward(n: usize) -> Arc<dyn RealToComplex<f64>> {
     planned(|rp, _| rp.plan_fft_forward(n.max(1)))
 }
 
+/// Forward and inverse complex transforms of length `n` (unnormalised), planned once per
+/// process.
+pub fn complex_pair(n: usize) -> (Arc<dyn Fft<f64>>, Arc<dyn Fft<f64>>) {
+    planned(|_, cp| (cp.plan_fft_forward(n.max(1)), cp.plan_fft_inverse(n.max(1))))
+}
+
 /// Transforms with fewer real samples than this run on the calling thread: below it, rayon's
 /// hand-offs (six fork-joins per transform pair) cost more than they gain on a shared 2-core
 /// machine (see reports/performance_process.md for the dwell-grid sizes).
