@@ -98,7 +98,7 @@ impl LineShift {
                 let ramp = |s: f64, k: usize, ph: &mut Complex64, rot: Complex64| {
                     if k > 0 {
                         *ph *= rot;
-                        if k % 64 == 0 {
+                        if k.is_multiple_of(64) {
                             let a = 2.0 * std::f64::consts::PI * s * k as f64 / m as f64;
                             *ph = Complex64::new(a.cos(), a.sin());
                         }
