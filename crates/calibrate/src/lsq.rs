@@ -11,6 +11,7 @@
 //! unaffected, instead of a fit that aborts or returns huge opposite coefficients.
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 
 /// Relative singular-value cut-off of the equilibrated Gram matrix (see the module docs).
 pub const RCOND: f64 = 1e-10;
@@ -42,16 +43,67 @@ pub fn products(
 /// `init`): `first = |_| 0` gives every product of every row with every target (a rectangular
 /// block, e.g. the cross terms of new columns with unchanged ones). Each entry is the same
 /// sequential sum as in [`products`].
+///
+/// Rows go to the rayon pool in groups of about equal work (each group a pass over the pixels
+/// of its own): every entry is still formed by one thread as the one sequential sum above, so
+/// the result does not depend on the grouping, bit for bit. A fit's Gram matrix is often formed
+/// while the other thread has nothing to do (a refinement's trial evaluation, the last
+/// contender of a round).
 pub fn products_from(
     rows: &[&[f64]],
     targets: &[&[f64]],
     w: &[f64],
     picked: Option<&[usize]>,
     init: f64,
-    first: impl Fn(usize) -> usize,
+    first: impl Fn(usize) -> usize + Sync,
 ) -> Vec<Vec<f64>> {
     let nt = targets.len();
-    let mut acc = vec![vec![init; nt]; rows.len()];
+    let work: Vec<usize> = (0..rows.len())
+        .map(|r| nt.saturating_sub(first(r)))
+        .collect();
+    let total: usize = work.iter().sum();
+    let npix = picked.map_or(w.len(), |p| p.len());
+    let threads = rayon::current_num_threads().min(rows.len());
+    if threads < 2 || total.saturating_mul(npix) < PARALLEL_MIN_PRODUCTS {
+        let all: Vec<usize> = (0..rows.len()).collect();
+        return products_of_rows(rows, targets, w, picked, init, &first, &all);
+    }
+    // Consecutive rows in `threads` groups of about total / threads products each.
+    let mut groups: Vec<Vec<usize>> = vec![Vec::new()];
+    let mut done = 0;
+    for (r, &wk) in work.iter().enumerate() {
+        let g = groups.len();
+        if done * threads >= g * total && g < threads && !groups[g - 1].is_empty() {
+            groups.push(Vec::new());
+        }
+        if let Some(v) = groups.last_mut() {
+            v.push(r);
+        }
+        done += wk;
+    }
+    let parts: Vec<Vec<Vec<f64>>> = groups
+        .par_iter()
+        .map(|g| products_of_rows(rows, targets, w, picked, init, &first, g))
+        .collect();
+    parts.into_iter().flatten().collect()
+}
+
+/// Products (pixels times rows times targets) below which [`products_from`] stays on the
+/// calling thread.
+const PARALLEL_MIN_PRODUCTS: usize = 1 << 21;
+
+/// [`products_from`] for the rows `which` (ascending), one serial pass over the pixels.
+fn products_of_rows(
+    rows: &[&[f64]],
+    targets: &[&[f64]],
+    w: &[f64],
+    picked: Option<&[usize]>,
+    init: f64,
+    first: &(impl Fn(usize) -> usize + Sync),
+    which: &[usize],
+) -> Vec<Vec<f64>> {
+    let nt = targets.len();
+    let mut acc = vec![vec![init; nt]; which.len()];
     let total = picked.map_or(w.len(), |p| p.len());
     // Gather buffers (used with `picked` only): the targets, the weights and the row.
     let mut buf = vec![0.0; if picked.is_some() { nt * BLOCK } else { 0 }];
@@ -80,7 +132,7 @@ pub fn products_from(
             }
             None => (targets.iter().map(|t| &t[lo..hi]).collect(), &w[lo..hi]),
         };
-        for (r, row) in acc.iter_mut().enumerate() {
+        for (&r, row) in which.iter().zip(acc.iter_mut()) {
             if first(r) >= nt {
                 continue;
             }
@@ -217,7 +269,14 @@ mod tests {
     /// counts across several blocks.
     #[test]
     fn blocked_gram_is_bit_identical_to_the_plain_loop() {
-        let len = 3 * BLOCK + 77;
+        // The short length stays on one thread; the long one, with 9 or more columns, is
+        // above PARALLEL_MIN_PRODUCTS and goes to the pool in row groups.
+        for len in [3 * BLOCK + 77, 40_077] {
+            gram_against_the_plain_loop(len);
+        }
+    }
+
+    fn gram_against_the_plain_loop(len: usize) {
         let mut state = 0x2545_f491_4f6c_dd1du64;
         let mut next = || {
             state ^= state << 13;
