@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use ndarray::{s, Array2};
 
 use crate::error::ProcessError;
-use crate::fft::Convolver;
+use crate::fft::{fast_len, Convolver};
 use crate::grid::Grid;
 use crate::interp::bilinear;
 use crate::path::PathLog;
@@ -251,7 +251,17 @@ impl Channels {
                     ((self.grid.y0_mm - ext.y0_mm) / ext.dy_mm).round() as usize,
                     ((self.grid.x0_mm - ext.x0_mm) / ext.dx_mm).round() as usize,
                 );
-                let conv = Convolver::new(ext.rows, ext.cols, kern.rate_nm_per_s.view());
+                // The map is zero outside the grid, which lies `offset` inside the grown grid,
+                // and the correlation is read on the whole grown grid: a circular one of length
+                // n is exact there when n >= max(offset + grid, grown - offset) + the kernel's
+                // half-width, on each axis (the linear one's grown + kernel is not needed: at
+                // 400^2 that was a 588^2 transform, 2^2 3 7^2, instead of 490^2).
+                let (k0, k1) = kern.rate_nm_per_s.dim();
+                let (o0, o1) = offset;
+                let n0 = fast_len((o0 + self.grid.rows).max(ext.rows - o0) + k0 / 2);
+                let n1 = fast_len((o1 + self.grid.cols).max(ext.cols - o1) + k1 / 2);
+                let conv =
+                    Convolver::with_fft_size(ext.rows, ext.cols, kern.rate_nm_per_s.view(), n0, n1);
                 Adjoint { conv, ext, offset }
             }
         };
@@ -523,8 +533,17 @@ mod tests {
     fn matched_filter_is_the_adjoint_of_resting_dwell() {
         let (g, grid, _) = setup();
         let c = Channels::new(g.clone(), &grid, 1.0).unwrap();
-        // A tool resting at pixel centres: <R(dwell), r> = sum_k dwell_k h_k.
-        let pts = [(5.0, 5.0), (10.25, 7.5), (3.0, 12.0)];
+        // A tool resting at pixel centres: <R(dwell), r> = sum_k dwell_k h_k. The last three
+        // rest off the map, near the grown grid's corners (its margin is 42 pixels, 10.5 mm),
+        // where a circular correlation too short would wrap the far side of the map in.
+        let pts = [
+            (5.0, 5.0),
+            (10.25, 7.5),
+            (3.0, 12.0),
+            (-10.25, -10.0),
+            (27.5, 25.0),
+            (-9.75, 24.75),
+        ];
         let r = Array2::from_shape_fn((60, 70), |(i, j)| ((i * 7 + j * 3) % 11) as f64 - 5.0);
         let t: Vec<f64> = (0..pts.len()).map(|k| k as f64).collect();
         let path = PathLog::new(
