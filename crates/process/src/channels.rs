@@ -260,8 +260,14 @@ impl Channels {
                 // 400^2 that was a 588^2 transform, 2^2 3 7^2, instead of 490^2).
                 let (k0, k1) = kern.rate_nm_per_s.dim();
                 let (o0, o1) = offset;
-                let n0 = fast_len((o0 + self.grid.rows).max(ext.rows - o0) + k0 / 2);
-                let n1 = fast_len((o1 + self.grid.cols).max(ext.cols - o1) + k1 / 2);
+                // At least the grown grid itself (the convolver takes no less), rounded up to a
+                // smooth length: the bound alone can fall a pixel or two short of the grown
+                // grid, which the convolver would then transform at its own, possibly prime,
+                // length.
+                let need0 = (o0 + self.grid.rows).max(ext.rows - o0) + k0 / 2;
+                let need1 = (o1 + self.grid.cols).max(ext.cols - o1) + k1 / 2;
+                let n0 = fast_len(need0.max(ext.rows));
+                let n1 = fast_len(need1.max(ext.cols));
                 let conv =
                     Convolver::with_fft_size(ext.rows, ext.cols, kern.rate_nm_per_s.view(), n0, n1);
                 Adjoint { conv, ext, offset }
