@@ -53,11 +53,11 @@ impl Effect for TifScale {
 const SCAN: (f64, f64, f64) = (0.7, 1.45, 0.05);
 
 /// Least in-sample reduction of the residual sum of squares by the derivative column, as a
-/// fraction of it, for the scan to run. Pure noise gives about 1 / (analysis pixels) (a few
-/// 1e-5; the synthetic suite's null runs 1e-4 to 8e-4), and a widening the selection could
-/// accept (a held-out reduction of at least the selection's `MIN_FRACTION`, 2.5e-3) projects
-/// above this on its own derivative. It gates the cost of the scan, not significance.
-const SCAN_GATE: f64 = 1e-3;
+/// fraction of it, for the scan to run. A fifth of the selection's `MIN_FRACTION`: pure noise
+/// gives about 1 / (analysis pixels) (a few 1e-5), and a widening the selection could accept
+/// (a held-out reduction of at least MIN_FRACTION) projects well above this on its own
+/// derivative.
+const SCAN_GATE: f64 = 0.2 * crate::selection::MIN_FRACTION;
 
 /// Profiled residual sum of squares with the accepted effects and a widening `t`.
 fn profiled_rss(cur: &Current, t: f64) -> Option<(f64, Vec<f64>)> {
