@@ -92,6 +92,10 @@ pub fn products_from(
 /// calling thread.
 const PARALLEL_MIN_PRODUCTS: usize = 1 << 21;
 
+/// Rows from which [`products_of_rows`] lays each block of targets out pixel by pixel
+/// ([`products_transposed`]); fewer rows read the targets as they are.
+const TRANSPOSED_MIN_ROWS: usize = 4;
+
 /// [`products_from`] for the rows `which` (ascending), one serial pass over the pixels.
 fn products_of_rows(
     rows: &[&[f64]],
@@ -102,6 +106,9 @@ fn products_of_rows(
     first: &(impl Fn(usize) -> usize + Sync),
     which: &[usize],
 ) -> Vec<Vec<f64>> {
+    if which.len() >= TRANSPOSED_MIN_ROWS {
+        return products_transposed(rows, targets, w, picked, init, first, which);
+    }
     let nt = targets.len();
     let mut acc = vec![vec![init; nt]; which.len()];
     let total = picked.map_or(w.len(), |p| p.len());
@@ -178,6 +185,110 @@ fn add_products<const N: usize>(row: &mut [f64], t: usize, cols: &[&[f64]], wx: 
         }
     }
     row[t..t + N].copy_from_slice(&s);
+}
+
+/// Zero targets after the last in each pixel's line of a transposed block: the widest tail
+/// chunk ([`row_products`], four targets) may read past the last target but stays in its line.
+const PAD: usize = 4;
+
+/// Pixels per block of [`products_transposed`]: its targets (8 bytes a pixel each) stay in the
+/// L1 cache.
+const TBLOCK: usize = 64;
+
+/// [`products_of_rows`] with each block of targets laid out pixel by pixel (the `nt` targets of
+/// pixel `i` side by side, then `PAD` zeros): a row's sums over `W` consecutive targets then
+/// read contiguous memory at every pixel and run as `W`-wide vector operations, `W / 4` AVX2
+/// registers (or `W / 2` SSE2 ones) of independent chains. Every entry is still its own
+/// sequential sum over the pixels in ascending order (a product, then a sum, never fused), so
+/// the result is [`products`]' plain loop to the bit.
+fn products_transposed(
+    rows: &[&[f64]],
+    targets: &[&[f64]],
+    w: &[f64],
+    picked: Option<&[usize]>,
+    init: f64,
+    first: &(impl Fn(usize) -> usize + Sync),
+    which: &[usize],
+) -> Vec<Vec<f64>> {
+    let nt = targets.len();
+    let stride = nt + PAD;
+    let mut acc = vec![vec![init; nt]; which.len()];
+    let total = picked.map_or(w.len(), |p| p.len());
+    let mut tb = vec![0.0; TBLOCK * stride];
+    let mut wx = vec![0.0; TBLOCK];
+    let mut lo = 0;
+    while lo < total {
+        let hi = (lo + TBLOCK).min(total);
+        let nb = hi - lo;
+        let at = |i: usize| picked.map_or(lo + i, |p| p[lo + i]);
+        for (k, t) in targets.iter().enumerate() {
+            for i in 0..nb {
+                tb[i * stride + k] = t[at(i)];
+            }
+        }
+        let tb = &tb[..nb * stride];
+        for (&r, row) in which.iter().zip(acc.iter_mut()) {
+            let t0 = first(r);
+            if t0 >= nt {
+                continue;
+            }
+            let x = rows[r];
+            for (i, d) in wx[..nb].iter_mut().enumerate() {
+                let j = at(i);
+                *d = w[j] * x[j];
+            }
+            row_products(row, t0, tb, stride, &wx[..nb]);
+        }
+        lo = hi;
+    }
+    acc
+}
+
+/// `row[t] += sum_i wx[i] tb[i * stride + t]` for every `t >= t0`, in chunks of 16, 8 and 4
+/// targets (the last chunk may run into the zero padding, whose sums are not kept).
+fn row_products(row: &mut [f64], t0: usize, tb: &[f64], stride: usize, wx: &[f64]) {
+    bonnetlab_spectrum::avx2_or_baseline!(row_products_impl(row, t0, tb, stride, wx))
+}
+
+#[inline(always)]
+fn row_products_impl(row: &mut [f64], t0: usize, tb: &[f64], stride: usize, wx: &[f64]) {
+    let nt = row.len();
+    let mut t = t0;
+    while t < nt {
+        let left = nt - t;
+        if left >= 16 {
+            chunk_products::<16>(row, t, 16, tb, stride, wx);
+            t += 16;
+        } else if left >= 8 {
+            chunk_products::<8>(row, t, 8, tb, stride, wx);
+            t += 8;
+        } else {
+            chunk_products::<PAD>(row, t, left.min(PAD), tb, stride, wx);
+            t += PAD;
+        }
+    }
+}
+
+/// `row[t..t + keep] += sum_i wx[i] tb[i * stride + t ..][..keep]` (`keep <= W`), the `W`
+/// sums side by side, each sequential over `i`.
+#[inline(always)]
+fn chunk_products<const W: usize>(
+    row: &mut [f64],
+    t: usize,
+    keep: usize,
+    tb: &[f64],
+    stride: usize,
+    wx: &[f64],
+) {
+    let mut s = [0.0f64; W];
+    s[..keep].copy_from_slice(&row[t..t + keep]);
+    for (line, &x) in tb.chunks_exact(stride).zip(wx) {
+        let c = &line[t..t + W];
+        for k in 0..W {
+            s[k] += x * c[k];
+        }
+    }
+    row[t..t + keep].copy_from_slice(&s[..keep]);
 }
 
 /// Weighted Gram matrix `G[a][b] = sum_i w_i c_a[i] c_b[i]` and `rhs[a] = sum_i w_i c_a[i] m_i`
@@ -284,7 +395,7 @@ mod tests {
             state ^= state << 17;
             (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
         };
-        for n in [1usize, 3, 4, 5, 8, 9, 12, 15] {
+        for n in [1usize, 3, 4, 5, 8, 9, 12, 15, 21, 38] {
             let cols: Vec<Vec<f64>> = (0..n)
                 .map(|_| (0..len).map(|_| next() * 1e3).collect())
                 .collect();

@@ -6,7 +6,9 @@
 //! versions perform the same operations in the same order and give bit-identical results.
 
 /// `avx2_or_baseline!(kernel(args...))`: calls the `#[inline(always)]` function `kernel`
-/// inside an AVX2-enabled wrapper when available, directly otherwise.
+/// inside an AVX2-enabled wrapper when available, directly otherwise. Exported for the other
+/// crates' hot loops (the calibration's Gram products), so the dispatch is written once.
+#[macro_export]
 macro_rules! avx2_or_baseline {
     ($f:ident($($a:expr),* $(,)?)) => {{
         #[cfg(target_arch = "x86_64")]
