@@ -174,6 +174,9 @@ pub struct Problem {
     /// Screening-fidelity columns (the candidates'), kept apart (see [`SCREENING_CACHE_BYTES`]).
     screening: Mutex<ColumnCache>,
     coarse: std::sync::OnceLock<Option<crate::coarse::Coarse>>,
+    /// The fallback's bases over the path (they depend on the path, the grid and the aperture
+    /// only, so every round asks for the same; built on first use).
+    fallback_shapes: std::sync::OnceLock<Vec<Arc<crate::effects::fallback::Shape>>>,
 }
 
 type ResampleCache = Mutex<Vec<([f64; 3], Arc<(Array2<f64>, Array2<bool>)>)>>;
@@ -406,6 +409,7 @@ impl Problem {
             columns: Mutex::new(ColumnCache::new(COLUMN_CACHE_BYTES)),
             screening: Mutex::new(ColumnCache::new(SCREENING_CACHE_BYTES)),
             coarse: std::sync::OnceLock::new(),
+            fallback_shapes: std::sync::OnceLock::new(),
         })
     }
 
@@ -497,6 +501,13 @@ impl Problem {
             m.put(key, Arc::new(col.clone()), free);
         }
         Ok(col)
+    }
+
+    /// The fallback's bases of this problem (see [`crate::effects::fallback::Shape::all_of`]),
+    /// built once.
+    pub fn fallback_shapes(&self) -> &[Arc<crate::effects::fallback::Shape>] {
+        self.fallback_shapes
+            .get_or_init(|| crate::effects::fallback::Shape::all_of(self))
     }
 
     /// The coarse registration of the after map onto the before map (computed once).

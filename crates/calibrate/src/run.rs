@@ -552,10 +552,16 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             .par_iter()
             .map(|&ci| {
                 let cand = &cands[ci];
-                let fc = fit(&ev, &cand.extra)?;
-                let nb = ev.cols.len();
                 let mut trial = effects.clone();
-                trial.push((cand.make)(&fc.coef[nb..], fc.coef[0]));
+                // A fallback's effect takes no start (its rate terms are linear and solved in
+                // the refinement), so its many columns' joint fit is not formed here.
+                trial.push(if fallback::is_fallback(cand.kind) {
+                    (cand.make)(&[], 1.0)
+                } else {
+                    let fc = fit(&ev, &cand.extra)?;
+                    let nb = ev.cols.len();
+                    (cand.make)(&fc.coef[nb..], fc.coef[0])
+                });
                 let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
                 Ok((trial, ev_t, f_t))
             })

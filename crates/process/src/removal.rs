@@ -842,16 +842,15 @@ impl FastRemoval {
             // The walk's own dwell is `dt` times a unit weight.
             None => self.removal_of_steps(&walk, &phases),
             Some(_) => {
+                // Sub-steps of weight zero add nothing and are left out: rate terms with
+                // compact support (a raster line, a time window, a knot of a rate map) then
+                // splat only their own dwell and mark only their own rows for the transforms.
                 let mut steps = std::mem::take(&mut self.steps);
                 steps.clear();
-                steps.extend(
-                    walk.iter()
-                        .zip(&self.walk_at)
-                        .map(|(st, &(k, fr))| SubStep {
-                            w: st.dt * weight_at(weights, k, fr),
-                            ..*st
-                        }),
-                );
+                steps.extend(walk.iter().zip(&self.walk_at).filter_map(|(st, &(k, fr))| {
+                    let w = st.dt * weight_at(weights, k, fr);
+                    (w != 0.0).then_some(SubStep { w, ..*st })
+                }));
                 let out = self.removal_of_steps(&steps, &phases);
                 self.steps = steps;
                 out

@@ -273,6 +273,15 @@ impl Shape {
         }
     }
 
+    /// Every basis's shape for `p` (those it has), in the order of [`Basis::ALL`].
+    pub fn all_of(p: &Problem) -> Vec<Arc<Shape>> {
+        let raster = Raster::of(p).map(Arc::new);
+        Basis::ALL
+            .into_iter()
+            .filter_map(|b| Shape::of(b, p, raster.as_ref()).map(Arc::new))
+            .collect()
+    }
+
     pub fn of(basis: Basis, p: &Problem, raster: Option<&Arc<Raster>>) -> Option<Shape> {
         let s = &p.samples;
         let n = s.len();
@@ -642,16 +651,17 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         return Vec::new();
     }
     let p = cur.p;
-    let raster = Raster::of(p).map(Arc::new);
-    let shapes: Vec<Shape> = fresh
-        .into_iter()
-        .filter_map(|b| Shape::of(b, p, raster.as_ref()))
+    let shapes: Vec<Arc<Shape>> = p
+        .fallback_shapes()
+        .iter()
+        .filter(|sh| fresh.contains(&sh.basis))
+        .cloned()
         .collect();
     // Prescreen (matched filters only): the many-column bases go on to their columns only
     // when the residual projects on them more than block-sign-flipped copies of it do.
     let flips = flipped_matched(cur);
     let trace = std::env::var_os("BONNETLAB_TRACE").is_some();
-    let shapes: Vec<Shape> = shapes
+    let shapes: Vec<Arc<Shape>> = shapes
         .into_iter()
         .filter(|sh| {
             if sh.cols.len() <= 1 {
@@ -692,7 +702,6 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
                 cur.column(&[(&gc, Channel::Value)])
             })
             .collect();
-        let shape = Arc::new(shape);
         out.push(Candidate {
             key: b.kind().into(),
             kind: b.kind(),
