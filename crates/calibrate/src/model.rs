@@ -510,6 +510,33 @@ impl Problem {
             .get_or_init(|| crate::effects::fallback::Shape::all_of(self))
     }
 
+    /// Column of the rate term `g` (per sample) centred on its dwell mean, `R(exec, g - mean)`
+    /// on the analysis pixels at `fidelity`, and the mean. A term that is zero on most samples
+    /// (a raster line, a time window, a knot of a rate map) is formed as `R(g) - mean R(1)`,
+    /// the same by linearity: `R(g)` then splats and transforms only the term's own dwell, and
+    /// `R(1)` is the plain path's column, shared by every term.
+    pub fn rate_term_column(
+        &self,
+        fidelity: Fidelity,
+        k: &Kernels,
+        exec: &PathLog,
+        g: &[f64],
+    ) -> Result<(Vec<f64>, f64), CalibrateError> {
+        let mean = self.samples.dwell_mean(g);
+        let zeros = g.iter().filter(|v| **v == 0.0).count();
+        if 2 * zeros >= g.len() && mean != 0.0 {
+            let mut c = self.column_at(fidelity, k, exec, &[(Channel::Value, Some(g))])?;
+            let one = self.column_at(fidelity, k, exec, &[(Channel::Value, None)])?;
+            for (a, b) in c.iter_mut().zip(&one) {
+                *a -= mean * b;
+            }
+            return Ok((c, mean));
+        }
+        let gc: Vec<f64> = g.iter().map(|v| v - mean).collect();
+        let c = self.column_at(fidelity, k, exec, &[(Channel::Value, Some(&gc))])?;
+        Ok((c, mean))
+    }
+
     /// The coarse registration of the after map onto the before map (computed once).
     pub fn coarse(&self) -> Option<crate::coarse::Coarse> {
         *self.coarse.get_or_init(|| {
@@ -780,7 +807,7 @@ pub fn evaluate(
     })
 }
 
-/// Columns `R(exec, g - mean(g))` for rate terms.
+/// Columns `R(exec, g - mean(g))` for rate terms (see [`Problem::rate_term_column`]).
 pub fn terms_columns(
     p: &Problem,
     exec: &PathLog,
@@ -791,9 +818,7 @@ pub fn terms_columns(
     terms
         .into_par_iter()
         .map(|(n, g)| {
-            let mean = p.samples.dwell_mean(&g);
-            let gc: Vec<f64> = g.iter().map(|v| v - mean).collect();
-            let c = p.channel_column(kernels, Channel::Value, exec, Some(&gc))?;
+            let (c, mean) = p.rate_term_column(Fidelity::Full, kernels, exec, &g)?;
             Ok((n, c, mean))
         })
         .collect()

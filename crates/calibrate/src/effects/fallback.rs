@@ -696,11 +696,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         let extra: Vec<Vec<f64>> = shape
             .cols
             .par_iter()
-            .map(|(_, g)| {
-                let m = p.samples.dwell_mean(g);
-                let gc: Vec<f64> = g.iter().map(|v| v - m).collect();
-                cur.column(&[(&gc, Channel::Value)])
-            })
+            .map(|(_, g)| cur.rate_term_column(g))
             .collect();
         out.push(Candidate {
             key: b.kind().into(),

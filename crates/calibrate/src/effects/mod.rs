@@ -120,6 +120,15 @@ impl Current<'_> {
             .unwrap_or_else(|_| vec![0.0; self.p.idx.len()])
     }
 
+    /// Column of the rate term `g` centred on its dwell mean, at screening fidelity (see
+    /// [`Problem::rate_term_column`]); zeros when it cannot be evaluated.
+    pub fn rate_term_column(&self, g: &[f64]) -> Vec<f64> {
+        self.p
+            .rate_term_column(Fidelity::Screening, &self.ev.kernels, &self.ev.exec, g)
+            .map(|(c, _)| c)
+            .unwrap_or_else(|_| vec![0.0; self.p.idx.len()])
+    }
+
     /// Column of the plain executed path through channel `ch` (no rate weights).
     pub fn plain_column(&self, ch: Channel) -> Vec<f64> {
         self.p
