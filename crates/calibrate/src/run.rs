@@ -672,15 +672,47 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     }
     stage("registration texture step");
     let lin = ev.linear(&f);
-    maps.effect_removal_nm = effect_removals(p, &effects, &ev, &f)?;
-    stage("effect removals");
-    let (sig, corr) = if effects.is_empty() {
-        (Vec::new(), Vec::new())
-    } else {
-        crate::uncertainty::uncertainties_and_correlations(p, &effects, &ev, &f, &sp)
-            .unwrap_or_default()
-    };
-    stage("uncertainties");
+    // What is read off the final state, side by side (each its own computation, so the
+    // results do not depend on the order): each effect's removal, the uncertainties, and the
+    // floor of the measured removal at the final registration (texture cancels) with the
+    // residual's bands.
+    let ((removals, (sig, corr)), (noise, floor_band, floor_axis, bands, unexplained, rmap, rmask)) =
+        rayon::join(
+            || {
+                rayon::join(
+                    || effect_removals(p, &effects, &ev, &f),
+                    || {
+                        if effects.is_empty() {
+                            (Vec::new(), Vec::new())
+                        } else {
+                            crate::uncertainty::uncertainties_and_correlations(
+                                p, &effects, &ev, &f, &sp,
+                            )
+                            .unwrap_or_default()
+                        }
+                    },
+                )
+            },
+            || {
+                let (noise, floor_band, floor_axis) = floor_of(p, &band, &ev);
+                let (rmap, rmask) = p.expand(&f.resid, &ev.w);
+                let bands = band.split(&p.grid, &rmap, &rmask, noise);
+                let unexplained =
+                    unexplained::find_by_band(&p.grid, &band, &rmap, &rmask, noise, &bands);
+                (
+                    noise,
+                    floor_band,
+                    floor_axis,
+                    bands,
+                    unexplained,
+                    rmap,
+                    rmask,
+                )
+            },
+        );
+    maps.effect_removal_nm = removals?;
+    maps.final_residual_nm = Some((rmap, rmask));
+    stage("effect removals, uncertainties, floor, bands and unexplained");
     // Names of the flat numeric parameters (the order of `sig`), with their effect's index.
     let mut flat_names: Vec<(usize, String)> = Vec::new();
     let mut k = 0;
@@ -745,13 +777,6 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             }
         }
     }
-    // The floor of the measured removal at the final registration (texture cancels).
-    let (noise, floor_band, floor_axis) = floor_of(p, &band, &ev);
-    let (rmap, rmask) = p.expand(&f.resid, &ev.w);
-    let bands = band.split(&p.grid, &rmap, &rmask, noise);
-    let unexplained = unexplained::find_by_band(&p.grid, &band, &rmap, &rmask, noise, &bands);
-    maps.final_residual_nm = Some((rmap, rmask));
-    stage("floor, bands and unexplained");
     Ok(Calibration {
         baseline,
         final_: Final {
