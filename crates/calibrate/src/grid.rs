@@ -23,8 +23,18 @@ pub fn smooth_masked(a: &Array2<f64>, valid: &Array2<bool>, sigma_px: f64) -> Ar
     let w: Vec<f64> = (-h..=h)
         .map(|k| (-(k * k) as f64 / (2.0 * sigma_px * sigma_px)).exp())
         .collect();
-    let num0 = Array2::from_shape_fn((r, c), |(i, j)| if valid[(i, j)] { a[(i, j)] } else { 0.0 });
-    let den0 = valid.mapv(|v| if v { 1.0 } else { 0.0 });
+    let mut num0 = Array2::<f64>::zeros((r, c));
+    let mut den0 = Array2::<f64>::zeros((r, c));
+    ndarray::Zip::from(&mut num0)
+        .and(&mut den0)
+        .and(a)
+        .and(valid)
+        .for_each(|n, d, &x, &v| {
+            if v {
+                *n = x;
+                *d = 1.0;
+            }
+        });
     // Separable passes over contiguous rows; every output sums its taps in ascending order
     // (the same sums as a tap-by-tap loop), with the taps clipped to the map once per pixel.
     // Each output row is formed on its own (rows side by side: the same sums).
@@ -51,14 +61,7 @@ pub fn smooth_masked(a: &Array2<f64>, valid: &Array2<bool>, sigma_px: f64) -> Ar
             .enumerate()
             .for_each(|(i, mut dst)| {
                 let dst = dst.as_slice_mut().expect("standard layout");
-                let lo = (i as isize - h).max(0) as usize;
-                let hi = (i as isize + h).min(r as isize - 1) as usize;
-                for ii in lo..=hi {
-                    let wk = w[(ii as isize - i as isize + h) as usize];
-                    for (d, x) in dst.iter_mut().zip(&src[ii * c..(ii + 1) * c]) {
-                        *d += wk * x;
-                    }
-                }
+                col_taps(src, c, i, &w, dst);
             });
         out
     };
@@ -73,14 +76,29 @@ pub fn smooth_masked(a: &Array2<f64>, valid: &Array2<bool>, sigma_px: f64) -> Ar
         || pass(&pass(&num0, true), false),
         || pass(&pass(&den0, true), false),
     );
-    Array2::from_shape_fn((r, c), |(i, j)| {
-        let d = den[(i, j)];
-        if d > 1e-9 {
-            num[(i, j)] / d
-        } else {
-            0.0
+    ndarray::Zip::from(&num)
+        .and(&den)
+        .map_collect(|&n, &d| if d > 1e-9 { n / d } else { 0.0 })
+}
+
+/// Output row `i` of the column pass: `dst` (zeros on entry) += `w[k] src row (i - h + k)` for
+/// the taps inside the map (`c` columns a row), in ascending order.
+fn col_taps(src: &[f64], c: usize, i: usize, w: &[f64], dst: &mut [f64]) {
+    bonnetlab_spectrum::avx2_or_baseline!(col_taps_impl(src, c, i, w, dst))
+}
+
+#[inline(always)]
+fn col_taps_impl(src: &[f64], c: usize, i: usize, w: &[f64], dst: &mut [f64]) {
+    let r = src.len() / c;
+    let h = w.len() / 2;
+    let lo = i.saturating_sub(h);
+    let hi = (i + h).min(r - 1);
+    for ii in lo..=hi {
+        let wk = w[ii + h - i];
+        for (d, x) in dst.iter_mut().zip(&src[ii * c..(ii + 1) * c]) {
+            *d += wk * x;
         }
-    })
+    }
 }
 
 /// One row of the separable smoothing: `dst[j]` = the sum over the taps `w` (odd length
@@ -89,6 +107,11 @@ pub fn smooth_masked(a: &Array2<f64>, valid: &Array2<bool>, sigma_px: f64) -> Ar
 /// together (independent sums, each in the same order: the same bits as one at a time, without
 /// waiting on one sum's additions).
 fn row_taps(src: &[f64], w: &[f64], dst: &mut [f64]) {
+    bonnetlab_spectrum::avx2_or_baseline!(row_taps_impl(src, w, dst))
+}
+
+#[inline(always)]
+fn row_taps_impl(src: &[f64], w: &[f64], dst: &mut [f64]) {
     let c = src.len();
     let h = w.len() / 2;
     let one = |j: usize| -> f64 {
