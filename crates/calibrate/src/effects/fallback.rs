@@ -578,10 +578,14 @@ fn flipped_matched(cur: &Current) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
                 // The residual's own: the rate channel's matched filter of this state.
                 return Some(cur.matched(Channel::Value));
             }
+            // Each block's sign drawn once.
+            let nbr = g.rows.div_ceil(b);
+            let flip: Vec<bool> = (0..(nbr * nbc) as u64)
+                .map(|blk| splitmix(blk ^ f.wrapping_mul(0xA076_1D64_78BD_642F)) & 1 == 1)
+                .collect();
             let mut m = r.clone();
             for ((i, j), v) in m.indexed_iter_mut() {
-                let blk = ((i / b) * nbc + j / b) as u64;
-                if splitmix(blk ^ f.wrapping_mul(0xA076_1D64_78BD_642F)) & 1 == 1 {
+                if flip[(i / b) * nbc + j / b] {
                     *v = -*v;
                 }
             }
