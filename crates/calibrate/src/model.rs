@@ -476,6 +476,18 @@ impl Problem {
         exec: &PathLog,
         terms: &[(Channel, Option<&[f64]>)],
     ) -> Result<Vec<f64>, CalibrateError> {
+        self.column_shared(fidelity, k, exec, terms)
+            .map(|c| c.as_ref().clone())
+    }
+
+    /// [`Self::column_at`] as the cache holds it (no copy).
+    fn column_shared(
+        &self,
+        fidelity: Fidelity,
+        k: &Kernels,
+        exec: &PathLog,
+        terms: &[(Channel, Option<&[f64]>)],
+    ) -> Result<Arc<Vec<f64>>, CalibrateError> {
         const SCREENING_SALT: u128 = 0x5c3e_e2a1_97d4_0b6f_81f2_4c7a_d935_e068;
         let base = fingerprint(k.scale(), exec, terms);
         let (full_key, screening_key) = (base, base ^ SCREENING_SALT);
@@ -484,21 +496,21 @@ impl Problem {
             Fidelity::Screening => (screening_key, &self.screening, full_key, &self.columns),
         };
         if let Some((hit, _)) = cache.lock().ok().and_then(|mut m| m.get(key)) {
-            return Ok(hit.as_ref().clone());
+            return Ok(hit);
         }
         // A path without spread lines gives the same bits at either fidelity, so the other
         // fidelity's column answers (a candidate's screening columns are the ones its
         // refinement asks for at full fidelity).
         if let Some((hit, true)) = other.lock().ok().and_then(|mut m| m.get(other_key)) {
-            return Ok(hit.as_ref().clone());
+            return Ok(hit);
         }
         let (map, free) = match terms {
             [(ch, g)] => k.removal_checked(fidelity, *ch, exec, *g)?,
             _ => k.removal_sum_checked(fidelity, exec, terms)?,
         };
-        let col = self.compress(&map);
+        let col = Arc::new(self.compress(&map));
         if let Ok(mut m) = cache.lock() {
-            m.put(key, Arc::new(col.clone()), free);
+            m.put(key, col.clone(), free);
         }
         Ok(col)
     }
@@ -525,11 +537,13 @@ impl Problem {
         let mean = self.samples.dwell_mean(g);
         let zeros = g.iter().filter(|v| **v == 0.0).count();
         if 2 * zeros >= g.len() && mean != 0.0 {
-            let mut c = self.column_at(fidelity, k, exec, &[(Channel::Value, Some(g))])?;
-            let one = self.column_at(fidelity, k, exec, &[(Channel::Value, None)])?;
-            for (a, b) in c.iter_mut().zip(&one) {
-                *a -= mean * b;
-            }
+            let cg = self.column_shared(fidelity, k, exec, &[(Channel::Value, Some(g))])?;
+            let one = self.column_shared(fidelity, k, exec, &[(Channel::Value, None)])?;
+            let c = cg
+                .iter()
+                .zip(one.iter())
+                .map(|(a, b)| a - mean * b)
+                .collect();
             return Ok((c, mean));
         }
         let gc: Vec<f64> = g.iter().map(|v| v - mean).collect();
