@@ -210,6 +210,10 @@ pub fn refine(
         lambda_min: 1e-7,
         rel_tol: 1e-6,
         step_tol: 0.0,
+        // At the minimum of a noisy profiled residual (forward-difference columns of a
+        // discretised model) the next step is predicted to gain less than this; trying it
+        // anyway cost up to `max_tries` full evaluations, each rejected at a higher damping.
+        pred_tol: 1e-6,
         diag_floor: 1e-300,
     };
     let mut problem = Refinement {

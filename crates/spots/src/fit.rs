@@ -146,6 +146,7 @@ pub fn fit_model(obs: &[Observation], start: &FitStart) -> Result<ModelFit, Spot
         lambda_min: 1e-12,
         rel_tol: 1e-15,
         step_tol: 1e-10,
+        pred_tol: 0.0,
         diag_floor: 1e-12,
     };
     let out = lm::minimize(&mut problem, q, r0, &settings)?;

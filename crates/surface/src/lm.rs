@@ -36,6 +36,11 @@ pub struct LmSettings {
     pub rel_tol: f64,
     /// Stop once an accepted step's largest component is below this (parameter units).
     pub step_tol: f64,
+    /// Stop without trying a step once the undamped (Gauss-Newton) step is predicted, by the
+    /// linearised residual, to lower the sum of squares by less than this fraction of it
+    /// (0: never). No damped step is predicted to do better, so at a noisy minimum this saves
+    /// the evaluations of the trials a rising damping would otherwise reject one by one.
+    pub pred_tol: f64,
     /// Floor of the column scaling `D_k` (a column of zeros is still damped).
     pub diag_floor: f64,
 }
@@ -51,6 +56,7 @@ impl Default for LmSettings {
             lambda_min: 1e-12,
             rel_tol: 1e-12,
             step_tol: 0.0,
+            pred_tol: 0.0,
             diag_floor: 1e-300,
         }
     }
@@ -143,6 +149,13 @@ pub fn minimize<P: LmProblem>(
             qr.push_row(&row);
         }
         let rf = qr.finish();
+        // |r|^2 and |r + J d_GN|^2: the corner of the factor of [J | -r] holds the latter.
+        let rss: f64 = r.iter().map(|v| v * v).sum();
+        let after_gn = rf[np * p + np] * rf[np * p + np];
+        if rss > 0.0 && rss - after_gn < settings.pred_tol * rss {
+            converged = true;
+            break;
+        }
         // Squared column norms of J: R^T R = [J | -r]^T [J | -r].
         let diag: Vec<f64> = (0..np)
             .map(|k| {

@@ -402,6 +402,7 @@ fn levenberg_marquardt(
         lambda_min: 1e-12,
         rel_tol: 1e-9,
         step_tol: 0.0,
+        pred_tol: 0.0,
         diag_floor: 1e-300,
     };
     let out = match minimize(&mut prob, p, start, &settings) {
