@@ -66,6 +66,19 @@ pub fn parse_bytes(bytes: &[u8], fmt: MapFormat) -> Result<Surface, ParseError> 
 pub const HEIGHT_LIMIT_NM: f64 = 1e15;
 
 fn check_heights(s: &Surface) -> Result<(), ParseError> {
+    // One branch-free pass over the heights alone: a surface holds no non-finite height and
+    // zero at every invalid pixel (`Surface::with_mask`), so a height beyond the limit is a
+    // valid pixel's (`!(|z| <= limit)` would also catch a NaN). The offending pixel is looked
+    // up only when there is one: indexing every pixel made reading a 640 x 480 `.dat` 2.0x
+    // slower than before the check (1.9-2.7 against 1.1-1.2 ms), this pass 1.02x.
+    let over = |a: bool, z: &f64| a | !(z.abs() <= HEIGHT_LIMIT_NM);
+    let all_fine = match s.heights_nm().as_slice() {
+        Some(h) => !h.chunks(1024).any(|c| c.iter().fold(false, over)),
+        None => !s.heights_nm().iter().fold(false, over),
+    };
+    if all_fine {
+        return Ok(());
+    }
     let bad = s
         .heights_nm()
         .indexed_iter()
@@ -129,4 +142,29 @@ pub fn write_surface(path: &Path, s: &Surface, fmt: MapFormat) -> Result<(), IoE
         },
     })?;
     atomic::write_atomic(path, &bytes).map_err(|e| IoError::write(path, e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array2;
+
+    #[test]
+    fn heights_beyond_the_limit_are_refused_at_their_pixel_and_only_where_valid() {
+        // 600 x 700: many 1024-pixel chunks, the bad pixel in a late one.
+        let mut h = Array2::from_shape_fn((600, 700), |(i, j)| (i as f64 - j as f64) * 0.5);
+        h[[412, 37]] = -2e15;
+        let s = Surface::new(h.clone(), Some(0.1), Some(0.1)).unwrap();
+        let e = check_heights(&s).unwrap_err().to_string();
+        assert!(e.contains("row 413, column 38"), "{e}");
+        // The same value on a masked pixel is no height at all: accepted.
+        let mut valid = Array2::from_elem(h.dim(), true);
+        valid[[412, 37]] = false;
+        let s = Surface::with_mask(h.clone(), valid, Some(0.1), Some(0.1)).unwrap();
+        assert!(check_heights(&s).is_ok());
+        // At the limit itself: accepted.
+        h[[412, 37]] = HEIGHT_LIMIT_NM;
+        let s = Surface::new(h, Some(0.1), Some(0.1)).unwrap();
+        assert!(check_heights(&s).is_ok());
+    }
 }
