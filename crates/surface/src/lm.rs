@@ -250,6 +250,44 @@ mod tests {
     struct Decay {
         t: Vec<f64>,
         y: Vec<f64>,
+        /// The model's prediction rounded to this (0: exact), like a discretised model's small
+        /// steps in the cost.
+        rounding: f64,
+        /// Forward-difference step of the Jacobian.
+        h: f64,
+        /// Trial points evaluated.
+        trials: usize,
+    }
+
+    impl Decay {
+        /// Samples of 3 exp(-0.7 t) with a fixed perturbation of 1e-3.
+        fn new(rounding: f64, h: f64) -> Self {
+            let t: Vec<f64> = (0..40).map(|i| i as f64 * 0.1).collect();
+            let y = t
+                .iter()
+                .enumerate()
+                .map(|(i, t)| 3.0 * (-0.7 * t).exp() + 1e-3 * ((i * 7 % 5) as f64 - 2.0))
+                .collect();
+            Decay {
+                t,
+                y,
+                rounding,
+                h,
+                trials: 0,
+            }
+        }
+
+        fn model(&self, x: &[f64]) -> Vec<f64> {
+            let r = self.rounding;
+            self.t
+                .iter()
+                .zip(&self.y)
+                .map(|(t, y)| {
+                    let m = x[0] * (-x[1] * t).exp();
+                    y - if r > 0.0 { (m / r).round() * r } else { m }
+                })
+                .collect()
+        }
     }
 
     impl LmProblem for Decay {
@@ -262,9 +300,12 @@ mod tests {
             (0..2)
                 .map(|k| {
                     let mut q = x.to_vec();
-                    q[k] += 1e-7;
-                    let rk = self.evaluate(&q, s)?.ok_or("outside")?;
-                    Ok(rk.iter().zip(s).map(|(a, b)| (a - b) / 1e-7).collect())
+                    q[k] += self.h;
+                    if q[1] > 50.0 {
+                        return Err("outside".to_string());
+                    }
+                    let rk = self.model(&q);
+                    Ok(rk.iter().zip(s).map(|(a, b)| (a - b) / self.h).collect())
                 })
                 .collect()
         }
@@ -272,29 +313,17 @@ mod tests {
             vec![x[0] + step[0], (x[1] + step[1]).max(1e-3)]
         }
         fn evaluate(&mut self, x: &[f64], _: &Vec<f64>) -> Result<Option<Vec<f64>>, String> {
+            self.trials += 1;
             if x[1] > 50.0 {
                 return Ok(None);
             }
-            Ok(Some(
-                self.t
-                    .iter()
-                    .zip(&self.y)
-                    .map(|(t, y)| y - x[0] * (-x[1] * t).exp())
-                    .collect(),
-            ))
+            Ok(Some(self.model(x)))
         }
     }
 
     #[test]
     fn fits_a_decay_where_the_gradient_vanishes() {
-        let t: Vec<f64> = (0..40).map(|i| i as f64 * 0.1).collect();
-        // Exact data plus a perturbation orthogonal to nothing in particular.
-        let y: Vec<f64> = t
-            .iter()
-            .enumerate()
-            .map(|(i, t)| 3.0 * (-0.7 * t).exp() + 1e-3 * ((i * 7 % 5) as f64 - 2.0))
-            .collect();
-        let mut p = Decay { t, y };
+        let mut p = Decay::new(0.0, 1e-7);
         let x0 = vec![1.0, 2.0];
         let s0 = p.evaluate(&x0, &vec![]).unwrap().unwrap();
         let o = minimize(&mut p, x0, s0, &LmSettings::default()).unwrap();
@@ -323,62 +352,12 @@ mod tests {
         assert!(o.converged);
     }
 
-    /// The decay of `fits_a_decay_where_the_gradient_vanishes` with a model that rounds its
-    /// prediction to 1e-7 (a discretised model's small steps in the cost), counting trials.
-    struct Rounded {
-        inner: Decay,
-        trials: usize,
-    }
-
-    impl LmProblem for Rounded {
-        type State = Vec<f64>;
-        type Error = String;
-        fn residual<'s>(&self, s: &'s Vec<f64>) -> &'s [f64] {
-            s
-        }
-        fn jacobian(&mut self, x: &[f64], s: &Vec<f64>) -> Result<Vec<Vec<f64>>, String> {
-            // Forward differences at a step the rounding does not swamp.
-            (0..2)
-                .map(|k| {
-                    let mut q = x.to_vec();
-                    q[k] += 1e-3;
-                    let rk = self.model(&q);
-                    Ok(rk.iter().zip(s).map(|(a, b)| (a - b) / 1e-3).collect())
-                })
-                .collect()
-        }
-        fn evaluate(&mut self, x: &[f64], _: &Vec<f64>) -> Result<Option<Vec<f64>>, String> {
-            self.trials += 1;
-            Ok(Some(self.model(x)))
-        }
-    }
-
-    impl Rounded {
-        fn model(&self, x: &[f64]) -> Vec<f64> {
-            let d = &self.inner;
-            d.t.iter()
-                .zip(&d.y)
-                .map(|(t, y)| y - (x[0] * (-x[1] * t).exp() * 1e7).round() / 1e7)
-                .collect()
-        }
-    }
-
     #[test]
     fn a_predicted_gain_below_pred_tol_ends_without_trials() {
-        let t: Vec<f64> = (0..40).map(|i| i as f64 * 0.1).collect();
-        let y: Vec<f64> = t
-            .iter()
-            .enumerate()
-            .map(|(i, t)| 3.0 * (-0.7 * t).exp() + 1e-3 * ((i * 7 % 5) as f64 - 2.0))
-            .collect();
+        // The decay with its prediction rounded to 1e-7 (a discretised model's small steps in
+        // the cost) and forward differences at a step the rounding does not swamp.
         let run = |pred_tol: f64| {
-            let mut p = Rounded {
-                inner: Decay {
-                    t: t.clone(),
-                    y: y.clone(),
-                },
-                trials: 0,
-            };
+            let mut p = Decay::new(1e-7, 1e-3);
             let x0 = vec![1.0, 2.0];
             let s0 = p.model(&x0);
             let settings = LmSettings {
