@@ -105,8 +105,8 @@ pub struct LmOutcome<S> {
     pub cost: f64,
     /// Iterations run (Jacobians evaluated).
     pub iterations: usize,
-    /// Whether a stopping rule (relative gain, step size, or no lower cost at any damping)
-    /// ended the run rather than the iteration limit.
+    /// Whether a stopping rule (relative gain, step size, predicted gain, or no lower cost at
+    /// any damping) ended the run rather than the iteration limit.
     pub converged: bool,
 }
 
