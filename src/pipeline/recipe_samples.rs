@@ -154,6 +154,7 @@ pub fn synth_config(spec: &RecipeRunSpec) -> SynthConfig {
             rms_nm: RECIPE_TEXTURE_RMS_NM,
         },
         truth_oversample: 2,
+        pixel_average: 1,
         tif: TrueTif::Gaussian(recipe_tif()),
         pitch_mm: RECIPE_PITCH_MM,
         feed_min_mm_per_s: RECIPE_FEED_MM_PER_S.0,

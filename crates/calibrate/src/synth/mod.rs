@@ -207,6 +207,11 @@ pub struct SynthConfig {
     pub surface: InitialSurface,
     /// Truth grid pixel = map pixel / this (the initial surface has detail down to it).
     pub truth_oversample: usize,
+    /// How a map pixel sees the surface: 1 (or 0) a point sample at its centre; n, the mean
+    /// of n x n point samples spread evenly over the pixel's square (a camera pixel integrates
+    /// the fringe over its area: content above the map's Nyquist is attenuated by the pixel's
+    /// sinc instead of folding back in full).
+    pub pixel_average: usize,
     pub tif: TrueTif,
     pub pitch_mm: f64,
     pub feed_min_mm_per_s: f64,
@@ -251,6 +256,7 @@ impl Default for SynthConfig {
                 msf_rms_nm: 4.0,
             },
             truth_oversample: 2,
+            pixel_average: 1,
             tif: TrueTif::default(),
             pitch_mm: 3.0,
             feed_min_mm_per_s: 2.0,
@@ -317,6 +323,7 @@ impl SynthConfig {
             pixel_mm: part_mm / n as f64,
             surface,
             truth_oversample: 2,
+            pixel_average: 1,
             tif: TrueTif::bonnet(800.0),
             pitch_mm: 3.0,
             feed_min_mm_per_s: 2.0,
@@ -884,17 +891,44 @@ pub fn generate_with(
         bonnetlab_process::interp::catmull_rom(&removal, u, v)
     };
 
-    // Before map: truth at the map's pixel centres. After map: truth minus removal at the
-    // misregistered positions.
+    // Before map: truth at the map's pixel centres (or averaged over each pixel, see
+    // `pixel_average`). After map: truth minus removal at the misregistered positions.
+    let na = cfg.pixel_average.max(1);
+    // Offsets (mm) of a pixel's sample points from its centre, in the map's own frame.
+    let offsets: Vec<(f64, f64)> = (0..na * na)
+        .map(|k| {
+            let (a, b) = ((k / na) as f64, (k % na) as f64);
+            (
+                ((b + 0.5) / na as f64 - 0.5) * grid.dx_mm,
+                ((a + 0.5) / na as f64 - 0.5) * grid.dy_mm,
+            )
+        })
+        .collect();
+    let pixel_mean = |f: &dyn Fn(f64, f64) -> f64, x: f64, y: f64| -> f64 {
+        offsets
+            .iter()
+            .map(|(ox, oy)| f(x + ox, y + oy))
+            .sum::<f64>()
+            / offsets.len() as f64
+    };
     let mut before = Array2::from_shape_fn((cfg.rows, cfg.cols), |(i, j)| {
-        truth.value(grid.x_mm(j), grid.y_mm(i))
+        pixel_mean(&|x, y| truth.value(x, y), grid.x_mm(j), grid.y_mm(i))
     });
     let mut after = Array2::from_shape_fn((cfg.rows, cfg.cols), |(i, j)| {
         // after-map pixel q shows the true point p = R(-theta) (q - c - d) + c
-        let (qx, qy) = (grid.x_mm(j) - cx - rdx, grid.y_mm(i) - cy - rdy);
         let (c, s) = (rth.cos(), rth.sin());
+        let seen = |x: f64, y: f64| {
+            let (qx, qy) = (x - cx - rdx, y - cy - rdy);
+            let (px, py) = (c * qx + s * qy + cx, -s * qx + c * qy + cy);
+            truth.value(px, py) - removal_at(px, py)
+        };
+        let (qx, qy) = (grid.x_mm(j) - cx - rdx, grid.y_mm(i) - cy - rdy);
         let (px, py) = (c * qx + s * qy + cx, -s * qx + c * qy + cy);
-        let mut h = truth.value(px, py) - removal_at(px, py);
+        let mut h = if na == 1 {
+            truth.value(px, py) - removal_at(px, py)
+        } else {
+            pixel_mean(&seen, grid.x_mm(j), grid.y_mm(i))
+        };
         for e in &cfg.effects {
             if let Injected::LocalDefect {
                 x_mm,
@@ -1052,6 +1086,60 @@ mod tests {
             // The same tool motion: the same path log.
             assert!(r.path.x_mm == plain.path.x_mm && r.path.y_mm == plain.path.y_mm);
         }
+    }
+
+    /// A camera pixel averages the surface over its square (`pixel_average`): against point
+    /// samples of the same field, the map's pixel-scale content is attenuated (first
+    /// differences along a row, which weigh the highest frequencies most) and its low-passed
+    /// content (9 x 9 pixel means) is the same to a few per cent; the default (1) is the point
+    /// sample, bit for bit.
+    #[test]
+    fn pixel_average_attenuates_the_pixel_scale_and_keeps_the_low_passed_map() {
+        let cfg = |n: usize| SynthConfig {
+            rows: 64,
+            cols: 64,
+            pixel_mm: 0.5,
+            surface: InitialSurface::PowerLaw {
+                exponent: 1.5,
+                rms_nm: 20.0,
+            },
+            deposit_step_mm: 0.5,
+            feed_min_mm_per_s: 10.0,
+            feed_max_mm_per_s: 30.0,
+            pixel_average: n,
+            ..SynthConfig::default().with_noise_nm(0.0, 0.0)
+        };
+        let map = |n: usize| generate(&cfg(n)).unwrap().before.heights_nm().clone();
+        let (point, one, avg) = (map(0), map(1), map(4));
+        assert!(point == one);
+        let d1 = |a: &Array2<f64>| {
+            let (mut s, mut k) = (0.0, 0.0);
+            for row in a.rows() {
+                for w in row.as_slice().unwrap().windows(2) {
+                    s += (w[1] - w[0]).powi(2);
+                    k += 1.0;
+                }
+            }
+            (s / k).sqrt()
+        };
+        let low = |a: &Array2<f64>| {
+            Array2::from_shape_fn((a.nrows() - 8, a.ncols() - 8), |(i, j)| {
+                a.slice(ndarray::s![i..i + 9, j..j + 9]).mean().unwrap()
+            })
+        };
+        let rms = |a: &Array2<f64>| (a.iter().map(|v| v * v).sum::<f64>() / a.len() as f64).sqrt();
+        let (lp, la) = (low(&point), low(&avg));
+        let low_change = rms(&(&la - &lp)) / rms(&lp);
+        let ratio = d1(&avg) / d1(&point);
+        eprintln!("first differences {ratio:.3}, low-passed change {low_change:.4}");
+        assert!(
+            ratio < 0.85,
+            "first differences {ratio:.3} of the point samples'"
+        );
+        assert!(
+            low_change < 0.05,
+            "low-passed map changed by {low_change:.4}"
+        );
     }
 
     #[test]
