@@ -163,6 +163,54 @@ fn misregistered_run_reports_the_fine_band_excess_as_unexplained() {
     assert!((u.rms_nm / excess - 1.0).abs() < 1e-9, "{s}");
 }
 
+/// Issue #15's final-residual criterion on misregistered runs whose map pixels average the
+/// surface over their area, as a camera's pixels do (`pixel_average`): texture above the map's
+/// Nyquist is attenuated by the pixel's sinc instead of folding back in full, and what still
+/// does not resample identically stays in the fine band. The process band's residual within
+/// 1.3x of the true floor's share of that band, and, where the full band is above 1.3x the
+/// floor, the fine band's excess under `unexplained` with the fine band's edges. Measured
+/// (session 19): process band 1.03, 1.16 and 1.17x its share on these three runs; on the
+/// roughest texture (exponent 1.8, `r` = 1) 1.295x, at the criterion's edge, and with point
+/// samples 8.5x there. The harness (reports/calibration.md): 50 of 50 registration runs meet
+/// the criterion with pixel means, 12 of 50 (the real-map runs) with point samples.
+#[test]
+fn misregistered_pixel_averaged_runs_leave_the_process_band_at_the_floor() {
+    for (r, beta, nb, na) in [(2, 2.6, 1.8, 1.2), (3, 2.2, 1.0, 1.0), (4, 2.0, 0.7, 1.4)] {
+        let cfg = SynthConfig {
+            pixel_average: 4,
+            ..scenario(r, beta, nb, na, 2, vec![misregistration()])
+        };
+        let (c, truth) = run(&cfg);
+        let s = summary(&c, truth);
+        eprintln!("misregistered pixel-averaged run {r}: {s}");
+        check_bands(&c, &s);
+        assert_eq!(
+            c.effects
+                .iter()
+                .map(|e| e.kind.as_str())
+                .collect::<Vec<_>>(),
+            ["registration"],
+            "{s}"
+        );
+        let process = &c.final_.bands[0];
+        let share = process.floor_nm * truth / c.noise_floor_rms_nm;
+        assert!(
+            process.rms_nm <= 1.3 * share,
+            "process band {:.3} nm against {share:.3} nm: {s}",
+            process.rms_nm
+        );
+        if c.final_.residual_rms_nm > 1.3 * truth {
+            let fine = &c.final_.bands[1];
+            assert!(
+                c.unexplained
+                    .iter()
+                    .any(|u| u.band_per_mm == fine.band_per_mm),
+                "no fine-band entry: {s}"
+            );
+        }
+    }
+}
+
 /// Issue #15's target on misregistered runs: the floor within 15 % of the generator's white
 /// noise. Not met (see reports/calibration.md, "Band-aware residual"): the registered
 /// difference's PSD stands 1.4-200 times above the true white level at every frequency from 0
