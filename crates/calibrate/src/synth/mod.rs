@@ -210,7 +210,8 @@ pub struct SynthConfig {
     /// How a map pixel sees the surface: 1 (or 0) a point sample at its centre; n, the mean
     /// of n x n point samples spread evenly over the pixel's square (a camera pixel integrates
     /// the fringe over its area: content above the map's Nyquist is attenuated by the pixel's
-    /// sinc instead of folding back in full).
+    /// sinc instead of folding back in full). The measured spot's pixels too, over their own
+    /// pixel (`spot_pixel_mm`).
     pub pixel_average: usize,
     pub tif: TrueTif,
     pub pitch_mm: f64,
@@ -1010,17 +1011,35 @@ pub fn generate_with(
     };
 
     // Measured spot: odd-sized map of the (unscaled) true TIF dwelled at its centre, point
-    // samples plus white noise.
+    // samples (or pixel means, see `pixel_average`) plus white noise.
     let sd = cfg.spot_pixel_mm.unwrap_or(d);
     let off = cfg.spot_offset_mm.0.abs().max(cfg.spot_offset_mm.1.abs());
     let half = ((ext * 1.25 + off) / sd).ceil() as usize;
     let n = 2 * half + 1;
     let mut spot_rng = stream(cfg.seed, 4);
+    // With `pixel_average`, each spot pixel is the mean over its own square, as the maps'.
+    let spot_offsets: Vec<(f64, f64)> = (0..na * na)
+        .map(|k| {
+            let (a, b) = ((k / na) as f64, (k % na) as f64);
+            (
+                ((b + 0.5) / na as f64 - 0.5) * sd,
+                ((a + 0.5) / na as f64 - 0.5) * sd,
+            )
+        })
+        .collect();
     let spot_h = Array2::from_shape_fn((n, n), |(i, j)| {
         let (x, y) = ((j as f64 - half as f64) * sd, (i as f64 - half as f64) * sd);
         let (ox, oy) = cfg.spot_offset_mm;
-        3.0 - cfg.spot_dwell_s * field.rate_at_mm(x - ox, y - oy)
-            + cfg.spot_noise_nm * spot_rng.normal()
+        let rate = if na == 1 {
+            field.rate_at_mm(x - ox, y - oy)
+        } else {
+            spot_offsets
+                .iter()
+                .map(|(px, py)| field.rate_at_mm(x + px - ox, y + py - oy))
+                .sum::<f64>()
+                / spot_offsets.len() as f64
+        };
+        3.0 - cfg.spot_dwell_s * rate + cfg.spot_noise_nm * spot_rng.normal()
     });
     let mut spot = Surface::new(spot_h, Some(sd), Some(sd))?;
     spot.provenance.format = "synthetic".into();
