@@ -114,6 +114,24 @@ fn check_bands(c: &Calibration, tag: &str) {
     );
 }
 
+/// Calibrates a misregistered run: its bands checked ([`check_bands`]) and the registration
+/// the one effect accepted. Returns the calibration, the true floor and the run's summary.
+fn registered(cfg: &SynthConfig, tag: &str) -> (Calibration, f64, String) {
+    let (c, truth) = run(cfg);
+    let s = summary(&c, truth);
+    eprintln!("{tag}: {s}");
+    check_bands(&c, &s);
+    assert_eq!(
+        c.effects
+            .iter()
+            .map(|e| e.kind.as_str())
+            .collect::<Vec<_>>(),
+        ["registration"],
+        "{s}"
+    );
+    (c, truth, s)
+}
+
 /// Null runs: the floor (read above the process band) within 15 % of the truth, no effect
 /// accepted, the final residual at the floor in both bands, nothing in `unexplained`.
 #[test]
@@ -137,17 +155,9 @@ fn null_runs_floor_per_band_and_nothing_accepted() {
 /// above its floor is under `unexplained` with the fine band's edges.
 #[test]
 fn misregistered_run_reports_the_fine_band_excess_as_unexplained() {
-    let (c, truth) = run(&scenario(1, 1.8, 0.5, 1.6, 1, vec![misregistration()]));
-    let s = summary(&c, truth);
-    eprintln!("misregistered run: {s}");
-    check_bands(&c, &s);
-    assert_eq!(
-        c.effects
-            .iter()
-            .map(|e| e.kind.as_str())
-            .collect::<Vec<_>>(),
-        ["registration"],
-        "{s}"
+    let (c, _, s) = registered(
+        &scenario(1, 1.8, 0.5, 1.6, 1, vec![misregistration()]),
+        "misregistered run",
     );
     let fine = &c.final_.bands[1];
     let u = c
@@ -181,18 +191,7 @@ fn misregistered_pixel_averaged_runs_leave_the_process_band_at_the_floor() {
             pixel_average: 4,
             ..scenario(r, beta, nb, na, 2, vec![misregistration()])
         };
-        let (c, truth) = run(&cfg);
-        let s = summary(&c, truth);
-        eprintln!("misregistered pixel-averaged run {r}: {s}");
-        check_bands(&c, &s);
-        assert_eq!(
-            c.effects
-                .iter()
-                .map(|e| e.kind.as_str())
-                .collect::<Vec<_>>(),
-            ["registration"],
-            "{s}"
-        );
+        let (c, truth, s) = registered(&cfg, &format!("misregistered pixel-averaged run {r}"));
         let process = &c.final_.bands[0];
         let share = process.floor_nm * truth / c.noise_floor_rms_nm;
         assert!(

@@ -669,6 +669,20 @@ fn initial_surface(
     })
 }
 
+/// Offsets (mm) from a pixel's centre of `n x n` points spread evenly over its `dx x dy` square
+/// (the centre alone for `n` = 1), row by row.
+fn pixel_offsets(n: usize, dx: f64, dy: f64) -> Vec<(f64, f64)> {
+    (0..n * n)
+        .map(|k| {
+            let (a, b) = ((k / n) as f64, (k % n) as f64);
+            (
+                ((b + 0.5) / n as f64 - 0.5) * dx,
+                ((a + 0.5) / n as f64 - 0.5) * dy,
+            )
+        })
+        .collect()
+}
+
 /// The deposition step of [`generate_with`]: the removal (nm) on `grid` of the true TIF
 /// `field` moved along `motion` (the realised tool motion), with the per-instant `modulation`
 /// of the injected effects (executed offset, rate factor, widening) applied.
@@ -895,16 +909,7 @@ pub fn generate_with(
     // Before map: truth at the map's pixel centres (or averaged over each pixel, see
     // `pixel_average`). After map: truth minus removal at the misregistered positions.
     let na = cfg.pixel_average.max(1);
-    // Offsets (mm) of a pixel's sample points from its centre, in the map's own frame.
-    let offsets: Vec<(f64, f64)> = (0..na * na)
-        .map(|k| {
-            let (a, b) = ((k / na) as f64, (k % na) as f64);
-            (
-                ((b + 0.5) / na as f64 - 0.5) * grid.dx_mm,
-                ((a + 0.5) / na as f64 - 0.5) * grid.dy_mm,
-            )
-        })
-        .collect();
+    let offsets = pixel_offsets(na, grid.dx_mm, grid.dy_mm);
     let pixel_mean = |f: &dyn Fn(f64, f64) -> f64, x: f64, y: f64| -> f64 {
         offsets
             .iter()
@@ -1018,15 +1023,7 @@ pub fn generate_with(
     let n = 2 * half + 1;
     let mut spot_rng = stream(cfg.seed, 4);
     // With `pixel_average`, each spot pixel is the mean over its own square, as the maps'.
-    let spot_offsets: Vec<(f64, f64)> = (0..na * na)
-        .map(|k| {
-            let (a, b) = ((k / na) as f64, (k % na) as f64);
-            (
-                ((b + 0.5) / na as f64 - 0.5) * sd,
-                ((a + 0.5) / na as f64 - 0.5) * sd,
-            )
-        })
-        .collect();
+    let spot_offsets = pixel_offsets(na, sd, sd);
     let spot_h = Array2::from_shape_fn((n, n), |(i, j)| {
         let (x, y) = ((j as f64 - half as f64) * sd, (i as f64 - half as f64) * sd);
         let (ox, oy) = cfg.spot_offset_mm;
