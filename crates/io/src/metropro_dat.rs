@@ -188,8 +188,10 @@ impl DatHeader {
     }
 }
 
-/// Reads a `.dat` map from its bytes.
-pub fn parse(bytes: &[u8]) -> Result<Surface, ParseError> {
+/// Reads a `.dat` map from its bytes, and the largest height magnitude (nm) of its valid pixels
+/// (0 when none), found in the same pass: the read's height check then needs no pass of its
+/// own.
+pub fn parse(bytes: &[u8]) -> Result<(Surface, f64), ParseError> {
     let hdr = parse_header(bytes)?;
     let scale = hdr.meta.nm_per_count()?;
     let pixel_mm = hdr.meta.pixel_mm()?;
@@ -203,6 +205,9 @@ pub fn parse(bytes: &[u8]) -> Result<Surface, ParseError> {
     // of a 4096 x 4096 map).
     let mut heights = vec![0.0f64; rows * cols];
     let mut valid = vec![false; rows * cols];
+    // |raw * scale| = |raw| |scale| exactly, and rounding is monotonic: the largest |height| is
+    // the largest |raw| times |scale|.
+    let mut peak_raw = 0u32;
     for ((c, h), v) in phase
         .chunks_exact(4)
         .zip(heights.iter_mut())
@@ -212,16 +217,18 @@ pub fn parse(bytes: &[u8]) -> Result<Surface, ParseError> {
         if raw < NO_DATA_MIN {
             *v = true;
             *h = f64::from(raw) * scale;
+            peak_raw = peak_raw.max(raw.unsigned_abs());
         }
     }
-    build_surface(
+    let s = build_surface(
         heights,
         valid,
         (rows, cols),
         &hdr.meta,
         pixel_mm,
         "metropro-dat",
-    )
+    )?;
+    Ok((s, f64::from(peak_raw) * scale.abs()))
 }
 
 /// Assembles a surface from row-major heights and mask; fails with `NoValidPixel` when empty.
