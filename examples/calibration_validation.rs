@@ -361,6 +361,12 @@ struct Outcome {
     final_over_floor: f64,
     floor_over_true: f64,
     cut: f64,
+    /// Baseline residual RMS over the true floor.
+    baseline_over_floor: f64,
+    /// 1 - (final^2 - floor^2) / (baseline^2 - floor^2), the true floor's mean square taken out
+    /// of both (the maps' white noise no effect can remove); NaN when the baseline stands at or
+    /// below the floor (nothing to cut).
+    excess_cut: f64,
     unexplained: usize,
     /// Process-band residual RMS over the true floor's share of that band (NaN without a
     /// process band in the output).
@@ -392,6 +398,16 @@ fn assess(kind: &str, truth: &Truth, cal: &Calibration, true_floor: f64) -> Outc
         final_over_floor: cal.final_.residual_rms_nm / true_floor,
         floor_over_true: cal.noise_floor_rms_nm / true_floor,
         cut: 1.0 - cal.final_.residual_rms_nm / cal.baseline.residual_rms_nm.max(1e-300),
+        baseline_over_floor: cal.baseline.residual_rms_nm / true_floor,
+        excess_cut: {
+            let ex = |r: f64| r * r - true_floor * true_floor;
+            let b = ex(cal.baseline.residual_rms_nm);
+            if b > 0.0 {
+                1.0 - ex(cal.final_.residual_rms_nm).max(0.0) / b
+            } else {
+                f64::NAN
+            }
+        },
         unexplained: cal.unexplained.len(),
         process_over_floor,
         fine_reported,
@@ -632,9 +648,10 @@ fn main() {
                         }
                     }
                     eprintln!(
-                        "{kind} x{size} run {r}: {:?} unexplained {} final/floor {:.2} process/floor {:.2} fine {} floor/true {:.2} err {} {:.1} s{}",
+                        "{kind} x{size} run {r}: {:?} unexplained {} baseline/floor {:.2} final/floor {:.2} process/floor {:.2} fine {} floor/true {:.2} err {} {:.1} s{}",
                         kinds,
                         cal.unexplained.len(),
+                        o.baseline_over_floor,
                         o.final_over_floor,
                         o.process_over_floor,
                         if o.fine_reported { "yes" } else { "no" },
@@ -726,12 +743,14 @@ fn report(
          runs with every parameter within 20 %. *1-sigma cover* = parameters whose reported 1-sigma interval contains the \
          truth. *final / floor* = final residual RMS over the true white-noise floor of before - after (the two maps' noise \
          in quadrature); *floor rep / true* = reported `noise_floor_rms_nm` over that truth; *cut* = 1 - final / baseline \
-         residual; *unexpl.* = runs with an `unexplained` entry; *<= 1.3x or fine* = runs whose final residual is at most \
+         residual; *excess cut* = the same on the excess over the true floor, 1 - (final^2 - floor^2) / (baseline^2 - \
+         floor^2) (the maps' white noise, which no effect can remove, taken out of both; median over runs whose baseline \
+         stands above the floor, and in brackets the share of those runs with at least 0.5); *unexpl.* = runs with an `unexplained` entry; *<= 1.3x or fine* = runs whose final residual is at most \
          1.3x the true floor, or whose process-band residual is at most 1.3x the true floor's share of that band with an \
          `unexplained` entry above the process band (the excess fine texture leaves). Medians unless said.\n\n",
     );
-    let mut head = "| kind | size | runs | errors | detected / FP | other | param err | <= 20 % | 1-sigma cover | final / floor | floor rep / true | cut | unexpl. | <= 1.3x or fine |".to_string();
-    let mut sep = "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|".to_string();
+    let mut head = "| kind | size | runs | errors | detected / FP | other | param err | <= 20 % | 1-sigma cover | final / floor | floor rep / true | cut | excess cut | unexpl. | <= 1.3x or fine |".to_string();
+    let mut sep = "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|".to_string();
     if args.time {
         head.push_str(" calibrate s |");
         sep.push_str("---|");
@@ -763,7 +782,7 @@ fn report(
             pct(det, n)
         };
         let mut line = format!(
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             kind_l,
             if kind == "null" {
                 "-".into()
@@ -792,6 +811,19 @@ fn report(
             fmt(median(ok.iter().map(|o| o.final_over_floor).collect()), 2),
             fmt(median(ok.iter().map(|o| o.floor_over_true).collect()), 2),
             fmt(median(ok.iter().map(|o| o.cut).collect()), 2),
+            {
+                let ex: Vec<f64> = ok
+                    .iter()
+                    .map(|o| o.excess_cut)
+                    .filter(|v| v.is_finite())
+                    .collect();
+                let half = ex.iter().filter(|v| **v >= 0.5).count();
+                if ex.is_empty() {
+                    "-".to_string()
+                } else {
+                    format!("{} ({})", fmt(median(ex.clone()), 2), pct(half, ex.len()))
+                }
+            },
             pct(ok.iter().filter(|o| o.unexplained > 0).count(), n),
             pct(ok.iter().filter(|o| final_ok(o)).count(), n),
         );

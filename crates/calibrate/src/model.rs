@@ -177,6 +177,8 @@ pub struct Problem {
     /// The fallback's bases over the path (they depend on the path, the grid and the aperture
     /// only, so every round asks for the same; built on first use).
     fallback_shapes: std::sync::OnceLock<Vec<Arc<crate::effects::fallback::Shape>>>,
+    /// The rate map's refinement (`rate_map_fine`), built only when a round offers it.
+    fallback_fine: std::sync::OnceLock<Option<Arc<crate::effects::fallback::Shape>>>,
 }
 
 type ResampleCache = Mutex<Vec<([f64; 3], Arc<(Array2<f64>, Array2<bool>)>)>>;
@@ -410,6 +412,7 @@ impl Problem {
             screening: Mutex::new(ColumnCache::new(SCREENING_CACHE_BYTES)),
             coarse: std::sync::OnceLock::new(),
             fallback_shapes: std::sync::OnceLock::new(),
+            fallback_fine: std::sync::OnceLock::new(),
         })
     }
 
@@ -520,6 +523,18 @@ impl Problem {
     pub fn fallback_shapes(&self) -> &[Arc<crate::effects::fallback::Shape>] {
         self.fallback_shapes
             .get_or_init(|| crate::effects::fallback::Shape::all_of(self))
+    }
+
+    /// The rate map's refinement of this problem (see
+    /// [`crate::effects::fallback::Basis::MapFine`]), built on first use: it is offered only
+    /// over an accepted rate map, and its many bases over every sample are not built before.
+    pub fn fallback_fine(&self) -> Option<&Arc<crate::effects::fallback::Shape>> {
+        self.fallback_fine
+            .get_or_init(|| {
+                use crate::effects::fallback::{Basis, Shape};
+                Shape::of(Basis::MapFine, self, None).map(Arc::new)
+            })
+            .as_ref()
     }
 
     /// Column of the rate term `g` (per sample) centred on its dwell mean, `R(exec, g - mean)`

@@ -275,11 +275,13 @@ impl Shape {
         }
     }
 
-    /// Every basis's shape for `p` (those it has), in the order of [`Basis::ALL`].
+    /// Every basis's shape for `p` (those it has), in the order of [`Basis::ALL`], but the
+    /// map's refinement (built apart when offered: [`Problem::fallback_fine`]).
     pub fn all_of(p: &Problem) -> Vec<Arc<Shape>> {
         let raster = Raster::of(p).map(Arc::new);
         Basis::ALL
             .into_iter()
+            .filter(|b| *b != Basis::MapFine)
             .filter_map(|b| Shape::of(b, p, raster.as_ref()).map(Arc::new))
             .collect()
     }
@@ -814,12 +816,15 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         return Vec::new();
     }
     let p = cur.p;
-    let shapes: Vec<Arc<Shape>> = p
+    let mut shapes: Vec<Arc<Shape>> = p
         .fallback_shapes()
         .iter()
         .filter(|sh| fresh.contains(&sh.basis))
         .cloned()
         .collect();
+    if fresh.contains(&Basis::MapFine) {
+        shapes.extend(p.fallback_fine().cloned());
+    }
     // Prescreen (matched filters only): the many-column bases go on to their columns only
     // when the residual projects on them more than block-sign-flipped copies of it do.
     let flips = flipped_matched(cur);
