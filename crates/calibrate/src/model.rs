@@ -129,6 +129,32 @@ impl Linear {
     }
 }
 
+/// The before map's heights (nm) with piston and tilt removed (least squares over the valid
+/// pixels): what the height covariates are taken from.
+pub fn plane_removed(g: &MapGrid, heights: &Array2<f64>, valid: &Array2<bool>) -> Array2<f64> {
+    let (cx, cy) = g.centre_mm();
+    let mut acc = [0.0f64; 6];
+    for ((i, j), &v) in valid.indexed_iter() {
+        if v {
+            let (x, y, z) = (g.x_mm(j) - cx, g.y_mm(i) - cy, heights[(i, j)]);
+            acc[0] += z;
+            acc[1] += x * z;
+            acc[2] += y * z;
+            acc[3] += x * x;
+            acc[4] += y * y;
+            acc[5] += 1.0;
+        }
+    }
+    let (pz, px, py) = (
+        acc[0] / acc[5].max(1.0),
+        acc[1] / acc[3].max(1e-12),
+        acc[2] / acc[4].max(1e-12),
+    );
+    Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
+        heights[(i, j)] - pz - px * (g.x_mm(j) - cx) - py * (g.y_mm(i) - cy)
+    })
+}
+
 /// Per-sub-step covariates of the commanded path.
 #[derive(Debug, Clone)]
 pub struct Covariates {
@@ -179,6 +205,8 @@ pub struct Problem {
     fallback_shapes: std::sync::OnceLock<Vec<Arc<crate::effects::fallback::Shape>>>,
     /// The rate map's refinement (`rate_map_fine`), built only when a round offers it.
     fallback_fine: std::sync::OnceLock<Option<Arc<crate::effects::fallback::Shape>>>,
+    /// The local height at the samples by smoothing length (see [`Self::local_height`]).
+    local_heights: Mutex<Vec<(u64, Arc<Vec<f64>>)>>,
 }
 
 type ResampleCache = Mutex<Vec<([f64; 3], Arc<(Array2<f64>, Array2<bool>)>)>>;
@@ -413,6 +441,7 @@ impl Problem {
             coarse: std::sync::OnceLock::new(),
             fallback_shapes: std::sync::OnceLock::new(),
             fallback_fine: std::sync::OnceLock::new(),
+            local_heights: Mutex::new(Vec::new()),
         })
     }
 
@@ -537,6 +566,69 @@ impl Problem {
             .as_ref()
     }
 
+    /// The local height at every sample (nm): the before map with piston and tilt removed,
+    /// Gaussian-smoothed over `sigma_mm` within the valid pixels, at the sample's position
+    /// (the covariate of [`crate::effects::rate_covariate::LocalHeight`]). The last few
+    /// lengths asked for are kept.
+    pub fn local_height(&self, sigma_mm: f64) -> Arc<Vec<f64>> {
+        let key = sigma_mm.to_bits();
+        if let Ok(c) = self.local_heights.lock() {
+            if let Some((_, v)) = c.iter().find(|(k, _)| *k == key) {
+                return v.clone();
+            }
+        }
+        let g = &self.grid;
+        let flat = plane_removed(g, &self.before, &self.before_valid);
+        let px = sigma_mm / (0.5 * (g.dx_mm + g.dy_mm));
+        // A length of many pixels is smoothed on d x d block means (at least 4 block pixels
+        // per sigma): the smoothed field is then interpolated between block centres to well
+        // below its own variation, and an 800^2 map at a 16 mm sigma is not a 1025-tap pass
+        // per pixel (2.4 s for the three candidates' lengths, against 0.3 s for all the
+        // other covariates).
+        let d = ((px / 4.0).floor() as usize).max(1);
+        let (rc, cc) = (g.rows.div_ceil(d), g.cols.div_ceil(d));
+        let mut num = Array2::<f64>::zeros((rc, cc));
+        let mut den = Array2::<f64>::zeros((rc, cc));
+        for ((i, j), &v) in self.before_valid.indexed_iter() {
+            if v {
+                num[(i / d, j / d)] += flat[(i, j)];
+                den[(i / d, j / d)] += 1.0;
+            }
+        }
+        let valid_c = den.mapv(|w| w > 0.0);
+        let mean_c = Array2::from_shape_fn((rc, cc), |ij| {
+            if den[ij] > 0.0 {
+                num[ij] / den[ij]
+            } else {
+                0.0
+            }
+        });
+        let half = 0.5 * (d as f64 - 1.0);
+        let gc = MapGrid::new(
+            rc,
+            cc,
+            g.dx_mm * d as f64,
+            g.dy_mm * d as f64,
+            g.x0_mm + half * g.dx_mm,
+            g.y0_mm + half * g.dy_mm,
+        );
+        let sm = smooth_masked(&mean_c, &valid_c, (px / d as f64).max(0.5));
+        let s = &self.samples;
+        let v: Arc<Vec<f64>> = Arc::new(match gc {
+            Ok(gc) => (0..s.len())
+                .map(|k| sample(&gc, &sm, s.x_mm[k], s.y_mm[k]))
+                .collect(),
+            Err(_) => vec![0.0; s.len()],
+        });
+        if let Ok(mut c) = self.local_heights.lock() {
+            if c.len() >= 8 {
+                c.remove(0);
+            }
+            c.push((key, v.clone()));
+        }
+        v
+    }
+
     /// Column of the rate term `g` (per sample) centred on its dwell mean, `R(exec, g - mean)`
     /// on the analysis pixels at `fidelity`, and the mean. A term that is zero on most samples
     /// (a raster line, a time window, a knot of a rate map) is formed as `R(g) - mean R(1)`,
@@ -632,28 +724,7 @@ impl Problem {
 /// measurement noise does not dominate the slope), signed distance to the part edge (mm).
 fn covariates(g: &MapGrid, before: &Surface, s: &Samples) -> Covariates {
     let valid = before.valid();
-    // Plane fit (piston, tilt) of the before map.
-    let (cx, cy) = g.centre_mm();
-    let mut acc = [0.0f64; 6];
-    for ((i, j), &v) in valid.indexed_iter() {
-        if v {
-            let (x, y, z) = (g.x_mm(j) - cx, g.y_mm(i) - cy, before.heights_nm()[(i, j)]);
-            acc[0] += z;
-            acc[1] += x * z;
-            acc[2] += y * z;
-            acc[3] += x * x;
-            acc[4] += y * y;
-            acc[5] += 1.0;
-        }
-    }
-    let (pz, px, py) = (
-        acc[0] / acc[5].max(1.0),
-        acc[1] / acc[3].max(1e-12),
-        acc[2] / acc[4].max(1e-12),
-    );
-    let flat = Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
-        before.heights_nm()[(i, j)] - pz - px * (g.x_mm(j) - cx) - py * (g.y_mm(i) - cy)
-    });
+    let flat = plane_removed(g, before.heights_nm(), valid);
     let sm = smooth_masked(&flat, valid, 2.0);
     let slope = Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
         let jp = (j + 1).min(g.cols - 1);

@@ -207,3 +207,49 @@ fn a_rate_map_finer_than_the_knots_is_refined() {
         assert_cut(&c, floor, r);
     }
 }
+
+/// A rate rising 25 % per sigma of the 5 mm-smoothed initial height (issue 15's case, which the
+/// 2 px height left at 1.9x the noise floor over 50 harness runs): reported as the height
+/// covariate with a fitted smoothing length near 5 mm, on a square and a round part, and the
+/// residual's excess over the floor cut by at least half.
+#[test]
+fn a_rate_following_the_smoothed_height_is_found_with_its_length() {
+    for r in [0, 1] {
+        let (c, floor) = run(&scenario(
+            r,
+            bonnet(),
+            vec![Injected::HeightRate {
+                per_sigma: 0.25,
+                smooth_mm: 5.0,
+            }],
+        ));
+        let e = c
+            .effects
+            .iter()
+            .find(|e| e.params.get("smoothing_mm").is_some())
+            .unwrap_or_else(|| panic!("run {r}: no smoothed height: {:?}", kinds(&c)));
+        assert_eq!(
+            e.params.get("covariate").and_then(|v| v.as_str()),
+            Some("height")
+        );
+        let len = num(e, "smoothing_mm");
+        eprintln!(
+            "run {r}: smoothing {len:.2} mm, residual {:.3} -> {:.3} nm (floor {floor:.3}), {:?}",
+            c.baseline.residual_rms_nm,
+            c.final_.residual_rms_nm,
+            kinds(&c)
+        );
+        assert!(
+            (3.5..=6.5).contains(&len),
+            "run {r}: smoothing {len:.2} mm vs 5 ({:?})",
+            kinds(&c)
+        );
+        assert!(
+            excess_cut(&c, floor) >= 0.5,
+            "run {r}: residual {:.3} -> {:.3} nm, floor {floor:.3} nm ({:?})",
+            c.baseline.residual_rms_nm,
+            c.final_.residual_rms_nm,
+            kinds(&c)
+        );
+    }
+}
