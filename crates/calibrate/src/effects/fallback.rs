@@ -223,17 +223,7 @@ impl Shape {
     /// unit's: a line or knot beyond a round aperture) cannot be told apart and are merged
     /// into the nearest unit that has enough.
     fn units(basis: Basis, units: Vec<Vec<f64>>, at: Vec<(f64, f64)>, p: &Problem) -> Shape {
-        let inside = inside_dwell(p);
-        let support: Vec<f64> = units
-            .iter()
-            .map(|g| g.iter().zip(&inside).map(|(a, b)| a * b).sum())
-            .collect();
-        let mut sorted = support.clone();
-        sorted.sort_by(|a, b| a.total_cmp(b));
-        let med = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
-        let keep: Vec<usize> = (0..units.len())
-            .filter(|&j| support[j] >= MIN_SUPPORT * med && support[j] > 0.0)
-            .collect();
+        let keep = supported(&units, p);
         let (units, at) = if keep.is_empty() || keep.len() == units.len() {
             (units, at)
         } else {
@@ -394,21 +384,14 @@ impl Shape {
     /// measured part (less than `MIN_SUPPORT` of the median unit's) left out: a knot beyond a
     /// round aperture cannot be told from its neighbours.
     fn surplus(basis: Basis, units: Vec<Vec<f64>>, at: Vec<(f64, f64)>, p: &Problem) -> Shape {
-        let inside = inside_dwell(p);
-        let support: Vec<f64> = units
-            .iter()
-            .map(|g| g.iter().zip(&inside).map(|(a, b)| a * b).sum())
-            .collect();
-        let mut sorted = support.clone();
-        sorted.sort_by(|a, b| a.total_cmp(b));
-        let med = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
         // A knot is kept only over the measured part, too: one out on the path's overtravel is
         // determined by the few pixels its hat reaches, and the hold-out test's halves then
         // disagree on it (held-out reductions of -0.1 to -2.7 with them on square parts).
         let on = p.before_valid.mapv(|v| if v { 1.0 } else { 0.0 });
         let over = |j: usize| sample(&p.grid, &on, at[j].0, at[j].1) >= 0.5;
-        let keep: Vec<usize> = (0..units.len())
-            .filter(|&j| support[j] >= MIN_SUPPORT * med && support[j] > 0.0 && over(j))
+        let keep: Vec<usize> = supported(&units, p)
+            .into_iter()
+            .filter(|&j| over(j))
             .collect();
         let dwell = keep
             .iter()
@@ -452,6 +435,22 @@ impl Shape {
         let mean = u.iter().zip(&self.dwell).map(|(a, b)| a * b).sum::<f64>() / w.max(1e-300);
         u.iter().map(|v| v / mean - 1.0).collect()
     }
+}
+
+/// Indices of the units with enough dwell over the measured part: at least `MIN_SUPPORT` of
+/// the median unit's, and some.
+fn supported(units: &[Vec<f64>], p: &Problem) -> Vec<usize> {
+    let inside = inside_dwell(p);
+    let support: Vec<f64> = units
+        .iter()
+        .map(|g| g.iter().zip(&inside).map(|(a, b)| a * b).sum())
+        .collect();
+    let mut sorted = support.clone();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let med = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    (0..units.len())
+        .filter(|&j| support[j] >= MIN_SUPPORT * med && support[j] > 0.0)
+        .collect()
 }
 
 /// Each sample's dwell (s) when it lies over the measured part, else 0.
