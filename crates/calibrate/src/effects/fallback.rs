@@ -335,15 +335,7 @@ impl Shape {
             }
             Basis::Map => {
                 let (x0, y0, nx, ny, hx, hy) = map_knots(p)?;
-                let mut units = Vec::with_capacity(nx * ny);
-                let mut at = Vec::with_capacity(nx * ny);
-                for j in 0..ny {
-                    for i in 0..nx {
-                        let (cx, cy) = (x0 + i as f64 * hx, y0 + j as f64 * hy);
-                        units.push(knot_hat(s, cx, cy, hx, hy));
-                        at.push((cx, cy));
-                    }
-                }
+                let (units, at) = knot_hats(s, (x0, y0), (nx, ny), (hx, hy), |_, _| true);
                 let mut sh = Shape::units(basis, units, at, p);
                 sh.step = (hx, hy);
                 Some(sh)
@@ -355,24 +347,17 @@ impl Shape {
                 // map's. No reference unit: the surplus hats do not sum to a constant.
                 let (x0, y0, nx, ny, hx, hy) = map_knots(p)?;
                 let (fx, fy) = (0.5 * hx, 0.5 * hy);
-                let mut units = Vec::new();
-                let mut at = Vec::new();
-                for j in 0..2 * ny - 1 {
-                    for i in 0..2 * nx - 1 {
-                        // The map's own knots are not new; the outer ring's are left out: a
-                        // hat there has half its reach off the path, is determined by the
-                        // few pixels at the part's edge, and the hold-out test's halves then
-                        // disagree on it (held-out reductions of -0.01 to -2.7 on square
-                        // parts with them, +0.16 to +0.43 on round ones without).
-                        let outer = i == 0 || j == 0 || i == 2 * nx - 2 || j == 2 * ny - 2;
-                        if (i % 2 == 0 && j % 2 == 0) || outer {
-                            continue;
-                        }
-                        let (cx, cy) = (x0 + i as f64 * fx, y0 + j as f64 * fy);
-                        units.push(knot_hat(s, cx, cy, fx, fy));
-                        at.push((cx, cy));
-                    }
-                }
+                let (mx, my) = (2 * nx - 1, 2 * ny - 1);
+                // The map's own knots are not new; the outer ring's are left out: a hat there
+                // has half its reach off the path, is determined by the few pixels at the
+                // part's edge, and the hold-out test's halves then disagree on it (held-out
+                // reductions of -0.01 to -2.7 on square parts with them, +0.16 to +0.43 on
+                // round ones without).
+                let new_inner = |i: usize, j: usize| {
+                    let outer = i == 0 || j == 0 || i == mx - 1 || j == my - 1;
+                    !(outer || (i.is_multiple_of(2) && j.is_multiple_of(2)))
+                };
+                let (units, at) = knot_hats(s, (x0, y0), (mx, my), (fx, fy), new_inner);
                 let mut sh = Shape::surplus(basis, units, at, p);
                 sh.step = (fx, fy);
                 Some(sh)
@@ -489,6 +474,31 @@ fn map_knots(p: &Problem) -> Option<(f64, f64, usize, usize, f64, f64)> {
     }
     let (hx, hy) = ((x1 - x0) / (nx - 1) as f64, (y1 - y0) / (ny - 1) as f64);
     Some((x0, y0, nx, ny, hx, hy))
+}
+
+/// Bilinear hats at every sample, one per knot `(i, j)` of the `n.0 x n.1` grid from `origin`
+/// with spacings `h` (row by row) that `keep` admits, and the knots' positions (mm).
+type KnotHats = (Vec<Vec<f64>>, Vec<(f64, f64)>);
+fn knot_hats(
+    s: &crate::path::Samples,
+    origin: (f64, f64),
+    n: (usize, usize),
+    h: (f64, f64),
+    keep: impl Fn(usize, usize) -> bool,
+) -> KnotHats {
+    let mut units = Vec::new();
+    let mut at = Vec::new();
+    for j in 0..n.1 {
+        for i in 0..n.0 {
+            if !keep(i, j) {
+                continue;
+            }
+            let (cx, cy) = (origin.0 + i as f64 * h.0, origin.1 + j as f64 * h.1);
+            units.push(knot_hat(s, cx, cy, h.0, h.1));
+            at.push((cx, cy));
+        }
+    }
+    (units, at)
 }
 
 /// The bilinear hat of knot (cx, cy) with spacings (hx, hy) at every sample.
