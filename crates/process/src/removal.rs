@@ -531,6 +531,9 @@ pub enum Fidelity {
     /// 0.68 % of the removal RMS off exact deposition, against 0.10 % at `Full`, with 5
     /// transforms instead of 33. For screening many candidate columns, never for a reported
     /// removal. A path whose lines keep a few phases is computed as in `Full`, to the bit.
+    /// Through [`crate::channels::Channels`], a derivative channel on a map whose pixel is fine
+    /// against the footprint is screened on a coarser grid (see
+    /// [`crate::channels::SCREENING_PIXELS_PER_RADIUS`]).
     Screening,
 }
 
