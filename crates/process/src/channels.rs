@@ -53,8 +53,9 @@ pub struct Channels {
 
 /// Coarse-pixel screening: the derivative channels' screening columns are computed on a grid
 /// this many pixels per footprint radius (at least) and interpolated bilinearly onto the map.
-/// A footprint of 10 mm is then screened at 0.25 mm, as a 400^2 map of a 100 mm part is
-/// computed in full; an 800^2 map's 0.125 mm pixel costs four times the transform. What a
+/// The validation harness's spot (6.2 mm footprint radius) is then screened at 0.25 mm on an
+/// 800^2 map of a 100 mm part (0.125 mm pixels, a quarter of the transform), and computed in
+/// full on a 400^2 or 500^2 map; the paper's bonnet (4.86 mm) at 0.2 mm on a 0.1 mm map. What a
 /// screening column is for is a residual's projection on it, and that survives: on the
 /// paper's bonnet at 0.1 mm (test
 /// `derivative_columns_screen_on_a_coarser_grid_where_the_pixel_is_fine`) the full column's
@@ -66,6 +67,31 @@ pub const SCREENING_PIXELS_PER_RADIUS: f64 = 20.0;
 
 /// Largest factor between the map pixel and the screening pixel.
 const MAX_SCREENING_FACTOR: usize = 4;
+
+/// Rates below this fraction of the peak are outside the footprint (see
+/// [`footprint_radius_mm`]).
+const FOOTPRINT_FRACTION: f64 = 1e-2;
+
+/// The footprint's radius (mm): the farthest point from the tool centre, sampled every
+/// `step_mm`, where the rate is at least [`FOOTPRINT_FRACTION`] of its peak. Not the field's
+/// half-extent, which for a measured spot is the measurement's window (a 10 mm spot measured
+/// on a 30 mm window would otherwise be screened at three times too coarse a pixel). The
+/// paper's bonnet: its 4.86 mm contact radius; a Gaussian: 3.03 sigma.
+pub fn footprint_radius_mm(field: &dyn RateField, step_mm: f64) -> Option<f64> {
+    let k = Tif::sample(field, step_mm, step_mm).ok()?;
+    let r = &k.rate_nm_per_s;
+    let peak = r.iter().fold(0.0f64, |a, &v| a.max(v));
+    if !(peak > 0.0 && peak.is_finite()) {
+        return None;
+    }
+    let (c0, c1) = (r.nrows() / 2, r.ncols() / 2);
+    let far = r
+        .indexed_iter()
+        .filter(|(_, &v)| v >= FOOTPRINT_FRACTION * peak)
+        .map(|((i, j), _)| (i as f64 - c0 as f64).hypot(j as f64 - c1 as f64))
+        .fold(0.0f64, f64::max);
+    Some(far * step_mm)
+}
 
 /// A channel's workspaces: the idle ones and how many to keep.
 #[derive(Default)]
@@ -125,14 +151,13 @@ impl Channels {
     }
 
     /// The grid the derivative channels' screening columns are computed on, when it is coarser
-    /// than the map's: pixels `b` times the map's, with `b` the largest integer (at most
-    /// 4) that keeps [`SCREENING_PIXELS_PER_RADIUS`] pixels across the widened footprint's
-    /// smaller half-extent, and one coarse pixel beyond the map on every side (so every map
-    /// pixel centre is interpolated between four coarse ones). `None` when `b` is 1.
+    /// than the map's: pixels `b` times the map's, with `b` the largest integer (at most 4)
+    /// that keeps [`SCREENING_PIXELS_PER_RADIUS`] pixels across the widened footprint's radius
+    /// (see [`footprint_radius_mm`]), and one coarse pixel beyond the map on every side (so
+    /// every map pixel centre is interpolated between four coarse ones). `None` when `b` is 1.
     pub fn screening_grid(&self) -> Option<Grid> {
-        let (hx, hy) = self.base.half_extent_mm();
-        let radius = self.scale * hx.min(hy);
         let pix = self.grid.dx_mm.max(self.grid.dy_mm);
+        let radius = footprint_radius_mm(&self.field(Channel::Value), 0.25 * pix)?;
         let b = (radius / (SCREENING_PIXELS_PER_RADIUS * pix)).floor();
         if !(b >= 2.0) {
             return None;
@@ -549,7 +574,7 @@ mod tests {
         assert_eq!(idle(&c), 2.min(most), "two held at once are both kept");
     }
 
-    /// On a map pixel fine against the footprint (the paper's bonnet, 4.9 mm contact radius,
+    /// On a map pixel fine against the footprint (the paper's bonnet, 4.86 mm contact radius,
     /// on a 0.1 mm grid), the derivative channels' screening columns come from a grid twice as
     /// coarse and project a residual as the full columns do, with rate weights and on a
     /// wiggled path; the value channel's screening is untouched (the raster's full model, to
@@ -560,6 +585,11 @@ mod tests {
         use crate::tif::bonnet::{BonnetTif, BonnetTifParams};
         let g: Arc<dyn RateField + Send> =
             Arc::new(BonnetTif::new(&BonnetTifParams::paper(100.0)).unwrap());
+        let radius = footprint_radius_mm(g.as_ref(), 0.01).unwrap();
+        assert!((radius - 4.86).abs() < 0.02, "contact radius {radius}");
+        let gauss = GaussianTif::new(1.5, 20.0, 1.0).unwrap();
+        let r_g = footprint_radius_mm(&gauss, 0.01).unwrap();
+        assert!((r_g - 1.5 * 3.035).abs() < 0.02, "Gaussian footprint {r_g}");
         let grid = Grid::new(220, 260, 0.1, 0.1, 0.0, 0.0).unwrap();
         let c = Channels::new(g.clone(), &grid, 1.0).unwrap();
         let coarse = c.screening_grid().expect("a coarse companion at 0.1 mm");
