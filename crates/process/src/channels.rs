@@ -159,7 +159,7 @@ impl Channels {
         let pix = self.grid.dx_mm.max(self.grid.dy_mm);
         let radius = footprint_radius_mm(&self.field(Channel::Value), 0.25 * pix)?;
         let b = (radius / (SCREENING_PIXELS_PER_RADIUS * pix)).floor();
-        if !(b >= 2.0) {
+        if b.is_nan() || b < 2.0 {
             return None;
         }
         let b = (b as usize).min(MAX_SCREENING_FACTOR);
