@@ -492,7 +492,10 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         // derivative column less than SCAN_SKIP_RATIO of that: then no widening competes
         // this round, and the next round looks again. A derivative column that competes
         // (a wider spot whose linearised start falls in a local minimum, with a feed
-        // covariate standing in for the rest) is always scanned.
+        // covariate standing in for the rest) is always scanned. The derivative column's
+        // own significance is no gate: a 5 % wider spot's column at the current scale can
+        // score z 2-3 and 0.02-0.2 of MIN_FRACTION while the scanned secant is accepted
+        // (harness tif_scale at 0.5x, 2 of 20 runs lost to a feed covariate when it was).
         if let Some(ti) = cands.iter().position(|c| c.kind == "tif_scale") {
             let excess = f.rss - f.n * noise * noise;
             let other_top = cands
@@ -514,8 +517,10 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                 };
                 eprintln!(
                     "tif_scale scan: best other candidate takes {:.2} of the excess, the \
-                     derivative column {ratio} of that{}",
+                     derivative column {ratio} of that (held-out z {:.1}, reduction {:.4}){}",
                     other_top / excess.max(1e-300),
+                    scores[ti].z,
+                    scores[ti].fraction,
                     if explained { " (skipped)" } else { "" }
                 );
             }

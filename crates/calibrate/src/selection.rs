@@ -10,8 +10,9 @@
 //! The block sign test (share of blocks where the candidate helps; z = (n_+ - n/2) / sqrt(n/4))
 //! is the robust alternative when a few blocks dominate the variance; `z` is the larger of the
 //! two. A candidate is significant when `z >= Z_MIN` and `Delta` is at least `MIN_FRACTION`
-//! of the held-out SSE of the current model. Under pure noise a fitted extra column can only
-//! lose on held-out data on average, so noise yields no accepted effect.
+//! of the held-out SSE of the current model, or when `z >= Z_STRONG` and `Delta` is at least
+//! half of that. Under pure noise a fitted extra column can only lose on held-out data on
+//! average, so noise yields no accepted effect.
 
 use crate::lsq;
 use crate::model::{Eval, Problem};
@@ -20,6 +21,13 @@ use crate::model::{Eval, Problem};
 pub const Z_MIN: f64 = 4.0;
 /// Minimum held-out reduction as a fraction of the held-out residual sum of squares.
 pub const MIN_FRACTION: f64 = 0.005;
+/// Held-out z at which half of `MIN_FRACTION` is enough. The fraction bar keeps out effects
+/// that are real on the data but too small to matter or to name (a 0.16 % TIF scale standing
+/// for the forward model's error on the demo's original-bonnet run: z 6.4, 0.40 % of the
+/// held-out sum of squares); a feed covariate of 2 % per mm/s on a run whose texture and noise
+/// fill the residual reduces it by 0.25-0.5 % at z 9-12 (four harness runs of 50 missed at the
+/// full bar). Twice `Z_MIN` tells those apart.
+pub const Z_STRONG: f64 = 2.0 * Z_MIN;
 
 pub struct Split {
     pub half_a: Vec<bool>,
@@ -135,7 +143,10 @@ pub struct Score {
 
 impl Score {
     pub fn significant(&self) -> bool {
-        self.z >= Z_MIN && self.fraction >= MIN_FRACTION && self.delta > 0.0
+        self.delta > 0.0
+            && self.z >= Z_MIN
+            && (self.fraction >= MIN_FRACTION
+                || (self.z >= Z_STRONG && self.fraction >= 0.5 * MIN_FRACTION))
     }
 }
 

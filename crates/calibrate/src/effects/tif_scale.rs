@@ -115,6 +115,7 @@ pub fn scanned(cur: &Current) -> Option<Candidate> {
     if lin_gain < SCAN_GATE * base_rss {
         return None;
     }
+    let started = std::time::Instant::now();
     let mut best: Option<(f64, f64, Vec<f64>)> = None;
     let (lo, hi, step) = SCAN;
     let n = ((hi - lo) / step).round() as usize;
@@ -142,6 +143,13 @@ pub fn scanned(cur: &Current) -> Option<Candidate> {
     consider(&grid, &mut best);
     if let Some(t0) = best.as_ref().map(|b| b.0) {
         consider(&[t0 - 0.5 * step, t0 + 0.5 * step], &mut best);
+    }
+    if std::env::var_os("BONNETLAB_TRACE").is_some() {
+        eprintln!(
+            "tif_scale: scanned in {:?}, best scale {:?}",
+            started.elapsed(),
+            best.as_ref().map(|b| b.0)
+        );
     }
     let (t, _, col) = best?;
     let secant: Vec<f64> = col
