@@ -260,3 +260,34 @@ pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Scor
         fraction: delta / sse_base.max(1e-300),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn score(z: f64, fraction: f64) -> Score {
+        Score {
+            delta: fraction * 1e4,
+            z,
+            fraction,
+        }
+    }
+
+    #[test]
+    fn the_fraction_bar_halves_at_twice_the_z_bar() {
+        // The full bar: z and fraction both at their minimum.
+        assert!(score(Z_MIN, MIN_FRACTION).significant());
+        assert!(!score(Z_MIN - 0.01, 0.5).significant());
+        assert!(!score(Z_STRONG - 0.01, 0.999 * MIN_FRACTION).significant());
+        // The demo's 0.16 % TIF scale on the original bonnet: z 6.37, 0.396 %.
+        assert!(!score(6.37, 0.00396).significant());
+        // A feed covariate of 2 % per mm/s that the full bar missed (z 9-12, 0.25-0.5 %).
+        assert!(score(9.3, 0.0045).significant());
+        assert!(score(Z_STRONG, 0.5 * MIN_FRACTION).significant());
+        assert!(!score(50.0, 0.499 * MIN_FRACTION).significant());
+        // A loss is never significant, whatever its z.
+        let mut s = score(20.0, 0.01);
+        s.delta = -1.0;
+        assert!(!s.significant());
+    }
+}
