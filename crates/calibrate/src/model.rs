@@ -21,7 +21,7 @@ use bonnetlab_surface::Surface;
 use ndarray::Array2;
 use rayon::prelude::*;
 
-use bonnetlab_process::channels::Channels;
+use bonnetlab_process::channels::{Channels, ScaleScan};
 use bonnetlab_process::removal::Fidelity;
 pub use bonnetlab_process::tif::derived::Channel;
 
@@ -465,6 +465,21 @@ impl Problem {
             cache.push(set.clone());
         }
         Ok(set)
+    }
+
+    /// The scan of the TIF scale up to `max_scale` over value-channel `terms` (path, rate
+    /// weights): see [`bonnetlab_process::channels::ScaleScan`].
+    pub fn scale_scan(
+        &self,
+        max_scale: f64,
+        terms: &[(&PathLog, Option<&[f64]>)],
+    ) -> Result<ScaleScan, CalibrateError> {
+        Ok(ScaleScan::new(
+            self.tif.field(),
+            &self.grid,
+            max_scale.min(MAX_SCALE),
+            terms,
+        )?)
     }
 
     /// Channel sets kept (see [`KERNEL_CACHE_BYTES`]).
@@ -947,14 +962,19 @@ pub fn fit(ev: &Eval, extra: &[Vec<f64>]) -> Result<Fit, CalibrateError> {
         .chain(extra.iter())
         .map(|c| c.as_slice())
         .collect();
-    let (g, r) = lsq::gram(&cols, &ev.m, &ev.w, None);
+    fit_columns(&cols, &ev.m, &ev.w)
+}
+
+/// Joint least-squares fit of `cols` to `m` over the pixels of weight `w` > 0 (see [`fit`]).
+pub fn fit_columns(cols: &[&[f64]], m: &[f64], w: &[f64]) -> Result<Fit, CalibrateError> {
+    let (g, r) = lsq::gram(cols, m, w, None);
     let coef = lsq::solve(&g, &r)
         .ok_or_else(|| CalibrateError::Processing("singular least-squares fit".into()))?;
     // Per pixel: `pred = sum_a coef_a col_a[i]` (columns in order, from 0.0), `resid = m -
     // pred`, `rss += resid^2` in ascending pixel order; the predictions are formed over blocks
     // of pixels column by column (contiguous reads), each the same sequential sum.
     const BLOCK: usize = 512;
-    let mut resid = ev.m.clone();
+    let mut resid = m.to_vec();
     let mut rss = 0.0;
     let mut n = 0.0;
     let mut pred = [0.0f64; BLOCK];
@@ -963,12 +983,12 @@ pub fn fit(ev: &Eval, extra: &[Vec<f64>]) -> Result<Fit, CalibrateError> {
         let hi = (lo + BLOCK).min(resid.len());
         let pred = &mut pred[..hi - lo];
         pred.fill(0.0);
-        for (c, col) in coef.iter().zip(&cols) {
+        for (c, col) in coef.iter().zip(cols) {
             for (p, v) in pred.iter_mut().zip(&col[lo..hi]) {
                 *p += c * v;
             }
         }
-        for ((r, w), p) in resid[lo..hi].iter_mut().zip(&ev.w[lo..hi]).zip(pred.iter()) {
+        for ((r, w), p) in resid[lo..hi].iter_mut().zip(&w[lo..hi]).zip(pred.iter()) {
             if *w > 0.0 {
                 *r -= p;
                 rss += *r * *r;

@@ -93,6 +93,63 @@ pub fn footprint_radius_mm(field: &dyn RateField, step_mm: f64) -> Option<f64> {
     Some(far * step_mm)
 }
 
+/// Removals through the value channel at many widenings of one TIF, for a scan of the TIF
+/// scale: the dwell of each term (path, rate weights) is walked, splatted and transformed
+/// once, at the support of the widest scale, and each scale then costs its kernels'
+/// transforms and an inverse transform per term (see [`crate::removal::DwellSpectra`]). Each
+/// removal equals [`Channels::removal`] of a [`Channels`] at that scale up to rounding.
+pub struct ScaleScan {
+    base: Arc<dyn RateField + Send>,
+    step_mm: f64,
+    max_scale: f64,
+    spectra: crate::removal::DwellSpectra,
+}
+
+impl std::fmt::Debug for ScaleScan {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "ScaleScan(up to {}, {:?})", self.max_scale, self.spectra)
+    }
+}
+
+impl ScaleScan {
+    /// The scan of `terms` on `grid` for widenings up to `max_scale` (> 0).
+    pub fn new(
+        base: Arc<dyn RateField + Send>,
+        grid: &Grid,
+        max_scale: f64,
+        terms: &[(&PathLog, Option<&[f64]>)],
+    ) -> Result<ScaleScan, ProcessError> {
+        if !(max_scale.is_finite() && max_scale > 0.0) {
+            return Err(ProcessError::invalid(format!(
+                "TIF scale must be positive, got {max_scale}"
+            )));
+        }
+        let step_mm = 0.1 * grid.dx_mm.min(grid.dy_mm);
+        let widest = Derived::new(base.clone(), max_scale, Channel::Value, step_mm);
+        let mut w = FastRemoval::from_field(&widest, grid)?;
+        let spectra = w.dwell_spectra(terms)?;
+        Ok(ScaleScan {
+            base,
+            step_mm,
+            max_scale,
+            spectra,
+        })
+    }
+
+    /// The removal (nm) of every term, in order, through the TIF widened by `scale` (in
+    /// `(0, max_scale]`).
+    pub fn removals(&self, scale: f64) -> Result<Vec<Array2<f64>>, ProcessError> {
+        if !(scale.is_finite() && scale > 0.0 && scale <= self.max_scale) {
+            return Err(ProcessError::invalid(format!(
+                "TIF scale {scale} outside the scan's (0, {}]",
+                self.max_scale
+            )));
+        }
+        let field = Derived::new(self.base.clone(), scale, Channel::Value, self.step_mm);
+        self.spectra.removals(&field)
+    }
+}
+
 /// A channel's workspaces: the idle ones and how many to keep.
 #[derive(Default)]
 struct Pool {
@@ -539,6 +596,43 @@ mod tests {
             time += 0.5;
         }
         (g, grid, PathLog::new(t, x, y).unwrap())
+    }
+
+    /// The scale scan's removals are the channels' own at each scale (only the transform size
+    /// differs: rounding), on a raster, the raster with rate weights, and a wiggled raster whose
+    /// lines spread over the phase nodes; a scale beyond the scan's is refused.
+    #[test]
+    fn a_scale_scan_gives_the_channels_removal_at_every_scale() {
+        let (g, grid, path) = setup();
+        let weights: Vec<f64> = (0..path.len())
+            .map(|k| 1.0 + 0.3 * (k as f64 * 0.05).sin())
+            .collect();
+        let wiggled = PathLog::new(
+            path.t_s.clone(),
+            path.x_mm.clone(),
+            path.y_mm
+                .iter()
+                .zip(&path.x_mm)
+                .map(|(y, x)| y + 0.3 * (x * 0.9).sin())
+                .collect(),
+        )
+        .unwrap();
+        let terms: Vec<(&PathLog, Option<&[f64]>)> =
+            vec![(&path, None), (&path, Some(&weights)), (&wiggled, None)];
+        let scan = ScaleScan::new(g.clone(), &grid, 1.45, &terms).unwrap();
+        for scale in [0.6, 1.0, 1.37, 1.45] {
+            let got = scan.removals(scale).unwrap();
+            let c = Channels::new(g.clone(), &grid, scale).unwrap();
+            for ((p, w), r) in terms.iter().zip(&got) {
+                let want = c.removal(Channel::Value, p, *w).unwrap();
+                let peak = want.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+                let diff = (r - &want).iter().fold(0.0f64, |a, v| a.max(v.abs()));
+                assert!(peak > 1.0, "scale {scale}: a removal to compare");
+                assert!(diff <= 1e-9 * peak, "scale {scale}: {diff} of {peak}");
+            }
+        }
+        assert!(scan.removals(1.5).is_err());
+        assert!(scan.removals(0.0).is_err());
     }
 
     /// Workspaces whose transforms run on the pool: one is kept while callers take one at a

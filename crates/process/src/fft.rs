@@ -721,58 +721,117 @@ impl MultiConvolver {
         origin: (usize, usize),
         shape: (usize, usize),
     ) -> Array2<f64> {
-        let (r0, c0) = origin;
+        self.check_window(origin, shape);
+        let mut any = false;
+        for (k, input, hint) in inputs {
+            self.forward_input(*input, *hint);
+            let kh = self.kernel_hats[*k].clone();
+            Self::accumulate(&mut self.acc, &self.spec, &kh, !any, self.fft.is_parallel());
+            any = true;
+        }
+        self.inverse_window(any, origin, shape)
+    }
+
+    /// The spectrum of one input at this convolver's transform size (rows flagged false in
+    /// `hint` are not read), to be convolved later through [`Self::apply_spectra_window`] with
+    /// kernels not known yet: a scan of the TIF's width transforms the dwell once and only the
+    /// kernels per width.
+    pub fn input_spectrum(
+        &mut self,
+        input: ArrayView2<f64>,
+        hint: Option<&[bool]>,
+    ) -> Vec<Complex<f64>> {
+        self.forward_input(input, hint);
+        self.spec.clone()
+    }
+
+    /// `sum_k input_k * kernel_k` from both spectra ([`Self::input_spectrum`],
+    /// [`Self::kernel_spectrum`]), summed in the order given, on the window of `shape` at
+    /// `origin`: what [`Self::apply_sum_window_hinted`] gives for the same inputs and kernels.
+    pub fn apply_spectra_window(
+        &mut self,
+        pairs: &[(&[Complex<f64>], &[Complex<f64>])],
+        origin: (usize, usize),
+        shape: (usize, usize),
+    ) -> Array2<f64> {
+        self.check_window(origin, shape);
+        let len = self.fft.spectrum_len();
+        let mut any = false;
+        for (input, kernel) in pairs {
+            assert!(
+                input.len() == len && kernel.len() == len,
+                "spectrum of another size"
+            );
+            Self::accumulate(&mut self.acc, input, kernel, !any, self.fft.is_parallel());
+            any = true;
+        }
+        self.inverse_window(any, origin, shape)
+    }
+
+    fn check_window(&self, (r0, c0): (usize, usize), shape: (usize, usize)) {
         assert!(
             r0 + shape.0 <= self.rows && c0 + shape.1 <= self.cols,
             "output window outside the convolution"
         );
+    }
+
+    /// Forward transform of one input into `spec`.
+    fn forward_input(&mut self, input: ArrayView2<f64>, hint: Option<&[bool]>) {
         let n1 = self.fft.shape().1;
-        let parallel = self.fft.is_parallel();
-        let mut any = false;
-        for (k, input, hint) in inputs {
-            let kh = &self.kernel_hats[*k];
-            let view = input.slice(ndarray::s![
-                ..self.rows.min(input.nrows()),
-                ..self.cols.min(input.ncols())
-            ]);
-            if let Some(cols) = live_columns(view, *hint, MAX_SPARSE_COLUMNS, &mut self.live_cols) {
-                self.fft
-                    .forward_columns(view, cols, &mut self.spec, &mut self.colbuf);
-            } else {
-                load_live_rows(
-                    &mut self.real,
-                    n1,
-                    *input,
-                    *hint,
-                    (self.rows, self.cols),
-                    &mut self.live,
-                );
-                self.fft.forward_live(
-                    &mut self.real,
-                    &mut self.tmp,
-                    &mut self.spec,
-                    Some(&self.live),
-                );
-            }
-            let first = !any;
-            let mac = |((a, s), k): ((&mut Complex<f64>, &Complex<f64>), &Complex<f64>)| {
-                *a = if first { s * k } else { *a + s * k };
-            };
-            if parallel {
-                self.acc
-                    .par_iter_mut()
-                    .zip(self.spec.par_iter())
-                    .zip(kh.par_iter())
-                    .for_each(mac);
-            } else {
-                self.acc
-                    .iter_mut()
-                    .zip(self.spec.iter())
-                    .zip(kh.iter())
-                    .for_each(mac);
-            }
-            any = true;
+        let view = input.slice(ndarray::s![
+            ..self.rows.min(input.nrows()),
+            ..self.cols.min(input.ncols())
+        ]);
+        if let Some(cols) = live_columns(view, hint, MAX_SPARSE_COLUMNS, &mut self.live_cols) {
+            self.fft
+                .forward_columns(view, cols, &mut self.spec, &mut self.colbuf);
+        } else {
+            load_live_rows(
+                &mut self.real,
+                n1,
+                input,
+                hint,
+                (self.rows, self.cols),
+                &mut self.live,
+            );
+            self.fft.forward_live(
+                &mut self.real,
+                &mut self.tmp,
+                &mut self.spec,
+                Some(&self.live),
+            );
         }
+    }
+
+    /// `acc = s * k` (first) or `acc += s * k`.
+    fn accumulate(
+        acc: &mut [Complex<f64>],
+        s: &[Complex<f64>],
+        k: &[Complex<f64>],
+        first: bool,
+        parallel: bool,
+    ) {
+        let mac = |((a, s), k): ((&mut Complex<f64>, &Complex<f64>), &Complex<f64>)| {
+            *a = if first { s * k } else { *a + s * k };
+        };
+        if parallel {
+            acc.par_iter_mut()
+                .zip(s.par_iter())
+                .zip(k.par_iter())
+                .for_each(mac);
+        } else {
+            acc.iter_mut().zip(s.iter()).zip(k.iter()).for_each(mac);
+        }
+    }
+
+    /// The inverse transform of `acc` on the window (zeros when nothing was accumulated).
+    fn inverse_window(
+        &mut self,
+        any: bool,
+        (r0, c0): (usize, usize),
+        shape: (usize, usize),
+    ) -> Array2<f64> {
+        let n1 = self.fft.shape().1;
         let mut out = Array2::zeros(shape);
         if !any {
             return out;

@@ -585,6 +585,78 @@ impl std::fmt::Debug for FastRemoval {
     }
 }
 
+/// The dwell side of removals (walk, splat by kernel, forward transforms) done once, for
+/// convolution with the kernels of other fields whose support is no wider than the field of
+/// the workspace that made them ([`FastRemoval::dwell_spectra`]): a scan of the TIF's width
+/// then costs, per width, its kernels' transforms and one inverse transform per term. A
+/// removal from here equals the workspace's own removal through that field up to rounding (the
+/// transform size is the widest field's).
+pub struct DwellSpectra {
+    grid: Grid,
+    ext: Grid,
+    h: (usize, usize),
+    half: (usize, usize),
+    fft_shape: (usize, usize),
+    /// Per term, per dwell map in target order: its kernel's key and its spectrum.
+    terms: Vec<Vec<((usize, u32), Vec<Complex<f64>>)>>,
+}
+
+impl std::fmt::Debug for DwellSpectra {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "DwellSpectra({} terms on {:?} grown to {:?})",
+            self.terms.len(),
+            self.grid,
+            self.ext
+        )
+    }
+}
+
+impl DwellSpectra {
+    /// The removal (nm) on the map grid of every term through `field`, in the order of the
+    /// terms. An error when the field's support is wider than the workspace's.
+    pub fn removals(&self, field: &dyn RateField) -> Result<Vec<Array2<f64>>, ProcessError> {
+        let (dx, dy) = (self.grid.dx_mm, self.grid.dy_mm);
+        let (p0, p1) = Tif::sample_half_widths(field, dx, dy)?;
+        if p0 > self.half.0 || p1 > self.half.1 {
+            return Err(ProcessError::invalid(format!(
+                "field half-widths ({p0}, {p1}) px exceed the dwell spectra's ({}, {}) px",
+                self.half.0, self.half.1
+            )));
+        }
+        let (n0, n1) = self.fft_shape;
+        let mut conv = MultiConvolver::with_fft_size(self.ext.rows, self.ext.cols, &[], n0, n1);
+        // Each kernel built once for every term that has dwell on it.
+        let mut hats: Vec<((usize, u32), Arc<Vec<Complex<f64>>>)> = Vec::new();
+        for &(key, _) in self.terms.iter().flatten() {
+            if !hats.iter().any(|(k, _)| *k == key) {
+                let t = kernel_of(key, field, dx, dy, self.half)?;
+                hats.push((key, conv.kernel_spectrum(t.rate_nm_per_s.view())));
+            }
+        }
+        let shape = (self.grid.rows, self.grid.cols);
+        Ok(self
+            .terms
+            .iter()
+            .map(|term| {
+                let pairs: Vec<(&[Complex<f64>], &[Complex<f64>])> = term
+                    .iter()
+                    .map(|(key, spec)| {
+                        let hat = hats
+                            .iter()
+                            .find(|(k, _)| k == key)
+                            .map(|(_, h)| h.as_slice())
+                            .expect("every key's kernel was built above");
+                        (spec.as_slice(), hat)
+                    })
+                    .collect();
+                conv.apply_spectra_window(&pairs, self.h, shape)
+            })
+            .collect())
+    }
+}
+
 impl FastRemoval {
     /// From a sampled TIF (resampled to the grid pitch if needed); its bilinear interpolant
     /// inside the sampled window is taken as the continuous footprint, as exact deposition of a
@@ -739,10 +811,7 @@ impl FastRemoval {
         if let Some(idx) = self.base[m] {
             return Ok(idx);
         }
-        let motion = [Motion::Resting, Motion::AlongX, Motion::AlongY][m];
-        let hat = self.spectrum((m, 0), |f, dx, dy, half| {
-            kernel_from_field(f, dx, dy, motion, half)
-        })?;
+        let hat = self.spectrum((m, 0), |f, dx, dy, half| kernel_of((m, 0), f, dx, dy, half))?;
         let idx = self.conv.push_kernel_spectrum(hat);
         self.base[m] = Some(idx);
         Ok(idx)
@@ -761,11 +830,8 @@ impl FastRemoval {
             e.used = now;
             return Ok(e.idx);
         }
-        let ph = q as f64 / PHASE_KEY_STEPS;
-        let t = self.spectrum((kind, q), |f, dx, dy, half| match kind {
-            1 => along_x_at_phase_sized(f, dx, dy, ph, half),
-            2 => along_y_at_phase_sized(f, dx, dy, ph, half),
-            _ => point_at_phase_sized(f, dx, dy, ph, kind == 3, half),
+        let t = self.spectrum((kind, q), |f, dx, dy, half| {
+            kernel_of((kind, q), f, dx, dy, half)
         })?;
         self.phase_builds += 1;
         let stale = self
@@ -835,6 +901,47 @@ impl FastRemoval {
         path: &PathLog,
         weights: Option<&[f64]>,
     ) -> Result<Array2<f64>, ProcessError> {
+        self.with_steps(path, weights, |w, steps, lines| {
+            w.removal_of_steps(steps, lines)
+        })?
+    }
+
+    /// The dwell side of the removals of `terms` (path, optional rate weights) at full
+    /// fidelity, transformed once (see [`DwellSpectra`]).
+    pub fn dwell_spectra(
+        &mut self,
+        terms: &[(&PathLog, Option<&[f64]>)],
+    ) -> Result<DwellSpectra, ProcessError> {
+        let fidelity = self.fidelity;
+        self.fidelity = Fidelity::Full;
+        let spectra: Result<Vec<_>, ProcessError> = terms
+            .iter()
+            .map(|(path, weights)| {
+                self.with_steps(path, *weights, |w, steps, lines| {
+                    w.dwell_spectra_of_steps(steps, lines)
+                })
+            })
+            .collect();
+        self.fidelity = fidelity;
+        let (n0, n1) = self.conv.fft().shape();
+        Ok(DwellSpectra {
+            grid: self.grid,
+            ext: self.ext,
+            h: self.h,
+            half: self.half,
+            fft_shape: (n0, n1),
+            terms: spectra?,
+        })
+    }
+
+    /// `f` of the sub-steps of `path` weighted by `weights` (the walk kept between calls, see
+    /// `walk`) and their line phases.
+    fn with_steps<T>(
+        &mut self,
+        path: &PathLog,
+        weights: Option<&[f64]>,
+        f: impl FnOnce(&mut Self, &[SubStep], &[Lines; 2]) -> T,
+    ) -> Result<T, ProcessError> {
         check_weights(path, weights)?;
         if self.walked.as_ref() != Some(path) {
             self.walk_path(path);
@@ -843,7 +950,7 @@ impl FastRemoval {
         let phases = std::mem::take(&mut self.walk_phases);
         let out = match weights {
             // The walk's own dwell is `dt` times a unit weight.
-            None => self.removal_of_steps(&walk, &phases),
+            None => f(self, &walk, &phases),
             Some(_) => {
                 // Sub-steps of weight zero add nothing and are left out: rate terms with
                 // compact support (a raster line, a time window, a knot of a rate map) then
@@ -854,14 +961,14 @@ impl FastRemoval {
                     let w = st.dt * weight_at(weights, k, fr);
                     (w != 0.0).then_some(SubStep { w, ..*st })
                 }));
-                let out = self.removal_of_steps(&steps, &phases);
+                let out = f(self, &steps, &phases);
                 self.steps = steps;
                 out
             }
         };
         self.walk = walk;
         self.walk_phases = phases;
-        out
+        Ok(out)
     }
 
     /// Walks `path` on the grown grid into `walk` / `walk_at` (unweighted) and keeps a copy.
@@ -898,6 +1005,84 @@ impl FastRemoval {
         steps: &[SubStep],
         lines: &[Lines; 2],
     ) -> Result<Array2<f64>, ProcessError> {
+        let plan = self.plan(lines);
+        let [sx, sy] =
+            self.phase_kernels([(plan.kind[0], &plan.wanted[0]), (plan.kind[1], &plan.wanted[1])])?;
+        let (maps, hit) = self.splat(steps, lines, &plan);
+        // Convolver index of each target with dwell.
+        let mut idx = vec![usize::MAX; maps.len()];
+        for (t, m) in maps.iter().enumerate() {
+            if m.is_some() {
+                idx[t] = match t {
+                    0..3 => self.base_kernel(t)?,
+                    _ if t < 3 + sx.len() => sx[t - 3],
+                    _ => sy[t - 3 - sx.len()],
+                };
+            }
+        }
+        // Summed in target order, whichever convolver slots the kernels took: a removal's
+        // bits do not depend on the calls before it (which phases were built, and where).
+        // Only the rows a map has dwell in are read (a large fresh map's other pages are never
+        // touched).
+        let views: Vec<crate::fft::HintedInput> = maps
+            .iter()
+            .enumerate()
+            .filter_map(|(t, m)| {
+                m.as_ref()
+                    .map(|a| (idx[t], a.view(), Some(&hit[t].rows[..])))
+            })
+            .collect();
+        let shape = (self.grid.rows, self.grid.cols);
+        let out = self.conv.apply_sum_window_hinted(&views, self.h, shape);
+        self.back_to_pool(maps, &hit);
+        Ok(out)
+    }
+
+    /// The dwell maps of `steps` by kernel (see [`Plan`]), transformed: per map with dwell, the
+    /// key of its kernel and its spectrum, in target order.
+    fn dwell_spectra_of_steps(
+        &mut self,
+        steps: &[SubStep],
+        lines: &[Lines; 2],
+    ) -> Vec<((usize, u32), Vec<Complex<f64>>)> {
+        let plan = self.plan(lines);
+        let (maps, hit) = self.splat(steps, lines, &plan);
+        let nx = plan.wanted[0].len();
+        let key = |f: f64| (f * PHASE_KEY_STEPS).round() as u32;
+        let out = maps
+            .iter()
+            .enumerate()
+            .filter_map(|(t, m)| {
+                let m = m.as_ref()?;
+                let k = match t {
+                    0..3 => (t, 0),
+                    _ if t < 3 + nx => kernel_key(plan.kind[0], key(plan.wanted[0][t - 3])),
+                    _ => kernel_key(plan.kind[1], key(plan.wanted[1][t - 3 - nx])),
+                };
+                Some((k, self.conv.input_spectrum(m.view(), Some(&hit[t].rows[..]))))
+            })
+            .collect();
+        self.back_to_pool(maps, &hit);
+        out
+    }
+
+    /// The maps back to the pool, zeroed (as many as it keeps).
+    fn back_to_pool(&mut self, maps: Vec<Option<Array2<f64>>>, hit: &[RowSpan]) {
+        let (rows, cols) = (self.ext.rows, self.ext.cols);
+        let most =
+            (POOLED_MAP_BYTES / (8 * rows * cols).max(1)).clamp(MIN_POOLED_MAPS, MAX_POOLED_MAPS);
+        for (m, span) in maps.into_iter().zip(hit) {
+            if let Some(mut m) = m {
+                if self.pool.len() < most {
+                    span.zero(&mut m);
+                    self.pool.push(m);
+                }
+            }
+        }
+    }
+
+    /// Which kernels the dwell of a walk with line phases `lines` goes to.
+    fn plan(&self, lines: &[Lines; 2]) -> Plan {
         // Dwell moving along X (Y) goes to its row (column) with the kernel of its line's
         // sub-row (sub-column) phase; when a path has too many line phases, or they spread,
         // it is shared linearly between kernels at the fixed phases j / PHASE_NODES instead.
@@ -919,7 +1104,24 @@ impl FastRemoval {
             Lines::Phases(lp) if lp.minor => k + 2,
             _ => k,
         };
-        let [sx, sy] = self.phase_kernels([(kind_of(1), &wanted(0)), (kind_of(2), &wanted(1))])?;
+        Plan {
+            wanted: [wanted(0), wanted(1)],
+            kind: [kind_of(1), kind_of(2)],
+            centred,
+        }
+    }
+
+    /// `steps` splatted onto the dwell maps of `plan`'s targets: 0..3 the centred kernels
+    /// (resting, along X, along Y), then the phase kernels of along-X and of along-Y lines
+    /// (`None` where a target has no dwell), with the rows each map has dwell in.
+    fn splat(
+        &mut self,
+        steps: &[SubStep],
+        lines: &[Lines; 2],
+        plan: &Plan,
+    ) -> (Vec<Option<Array2<f64>>>, Vec<RowSpan>) {
+        let centred = plan.centred;
+        let (nx, ny) = (plan.wanted[0].len(), plan.wanted[1].len());
         // Where each motion's stray dwell (off its lines, or a minor share of a sub-step) goes:
         // with one motion minor, onto the point-sampled kernel (see MINOR_MOTION_SHARE), else
         // onto its own motion's centred kernel.
@@ -935,10 +1137,8 @@ impl FastRemoval {
                 kind
             }
         };
-        // Maps by target: 0..3 the centred kernels (resting, along X, along Y), then the phase
-        // kernels of `sx` and `sy`; their convolver indices are resolved after the splat.
         let (rows, cols) = (self.ext.rows, self.ext.cols);
-        let mut maps: Vec<Option<Array2<f64>>> = vec![None; 3 + sx.len() + sy.len()];
+        let mut maps: Vec<Option<Array2<f64>>> = vec![None; 3 + nx + ny];
         // Rows each map has dwell in (a raster's phase map holds one row per line): only these
         // are zeroed again for the pool.
         let mut hit: Vec<RowSpan> = vec![RowSpan::default(); maps.len()];
@@ -968,7 +1168,7 @@ impl FastRemoval {
                     continue;
                 }
                 let (n, f, b) = row_phase(across_of(kind, u, v));
-                let base = if kind == 1 { 3 } else { 3 + sx.len() };
+                let base = if kind == 1 { 3 } else { 3 + nx };
                 let along = if kind == 1 { v } else { u };
                 let put = |d: &mut Array2<f64>, n: isize, w: f64| {
                     if kind == 1 {
@@ -1009,43 +1209,49 @@ impl FastRemoval {
                 }
             }
         }
-        // Convolver index of each target with dwell.
-        let mut idx = vec![usize::MAX; maps.len()];
-        for (t, m) in maps.iter().enumerate() {
-            if m.is_some() {
-                idx[t] = match t {
-                    0..3 => self.base_kernel(t)?,
-                    _ if t < 3 + sx.len() => sx[t - 3],
-                    _ => sy[t - 3 - sx.len()],
-                };
-            }
+        (maps, hit)
+    }
+}
+
+/// Which kernels a walk's dwell goes to: per motion (along X, along Y), the line phases that
+/// get a kernel of their own, the kernel kind (1, 2 box kernels; 3, 4 point-sampled for a
+/// minor motion), and whether the motion goes onto its centred kernel only (screening).
+struct Plan {
+    wanted: [Vec<f64>; 2],
+    kind: [usize; 2],
+    centred: [bool; 2],
+}
+
+/// The key of the kernel of motion `kind` at phase key `q` (phase 0 is the centred kernel of
+/// the motion: resting for the point-sampled kinds).
+fn kernel_key(kind: usize, q: u32) -> (usize, u32) {
+    if q == 0 {
+        (if kind > 2 { 0 } else { kind }, 0)
+    } else {
+        (kind, q)
+    }
+}
+
+/// The kernel of `key` ([`kernel_key`]) of `field` on a pixel `dx` x `dy` with half-widths
+/// `half`: the centred kernels `(m, 0)` of motion m (resting, along X, along Y), the along-X and
+/// along-Y line kernels `(1, q)`, `(2, q)` and the point-sampled ones `(3, q)`, `(4, q)` at
+/// phase `q / PHASE_KEY_STEPS` of a pixel.
+fn kernel_of(
+    key: (usize, u32),
+    f: &dyn RateField,
+    dx: f64,
+    dy: f64,
+    half: (usize, usize),
+) -> Result<Tif, ProcessError> {
+    let ph = key.1 as f64 / PHASE_KEY_STEPS;
+    match key {
+        (m, 0) if m < 3 => {
+            let motion = [Motion::Resting, Motion::AlongX, Motion::AlongY][m];
+            kernel_from_field(f, dx, dy, motion, half)
         }
-        // Summed in target order, whichever convolver slots the kernels took: a removal's
-        // bits do not depend on the calls before it (which phases were built, and where).
-        // Only the rows a map has dwell in are read (a large fresh map's other pages are never
-        // touched).
-        let views: Vec<crate::fft::HintedInput> = maps
-            .iter()
-            .enumerate()
-            .filter_map(|(t, m)| {
-                m.as_ref()
-                    .map(|a| (idx[t], a.view(), Some(&hit[t].rows[..])))
-            })
-            .collect();
-        let shape = (self.grid.rows, self.grid.cols);
-        let out = self.conv.apply_sum_window_hinted(&views, self.h, shape);
-        // Back to the pool, zeroed.
-        let most =
-            (POOLED_MAP_BYTES / (8 * rows * cols).max(1)).clamp(MIN_POOLED_MAPS, MAX_POOLED_MAPS);
-        for (m, span) in maps.into_iter().zip(&hit) {
-            if let Some(mut m) = m {
-                if self.pool.len() < most {
-                    span.zero(&mut m);
-                    self.pool.push(m);
-                }
-            }
-        }
-        Ok(out)
+        (1, _) => along_x_at_phase_sized(f, dx, dy, ph, half),
+        (2, _) => along_y_at_phase_sized(f, dx, dy, ph, half),
+        (kind, _) => point_at_phase_sized(f, dx, dy, ph, kind == 3, half),
     }
 }
 

@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 
 use crate::effects::{Candidate, Current};
-use crate::model::{evaluate, fit, Channel, Effect, Linear, Param, Problem, MAX_SCALE};
+use crate::model::{evaluate, fit, fit_columns, Channel, Effect, Linear, Param, Problem, MAX_SCALE};
 
 #[derive(Debug, Clone)]
 pub struct TifScale {
@@ -116,25 +116,62 @@ pub fn scanned(cur: &Current) -> Option<Candidate> {
         return None;
     }
     let started = std::time::Instant::now();
-    let mut best: Option<(f64, f64, Vec<f64>)> = None;
     let (lo, hi, step) = SCAN;
     let n = ((hi - lo) / step).round() as usize;
-    // The scales of a pass are evaluated side by side (each has its own forward model) and
-    // taken in the order given, so the best is the one the sequential scan would keep.
-    let consider = |ts: &[f64], best: &mut Option<(f64, f64, Vec<f64>)>| {
-        let got: Vec<Option<(f64, Vec<f64>)>> = ts
+    let p = cur.p;
+    // The scan's residuals come from one [`ScaleScan`] of the model's value-channel terms (the
+    // baseline and the accepted rate terms, centred on their dwell means as `evaluate` centres
+    // them): their dwell is walked, splatted and transformed once, each scale costs its
+    // kernels and an inverse transform per term. Only the best scale is evaluated in full.
+    let exec = &cur.ev.exec;
+    let centred: Vec<Vec<f64>> = cur
+        .accepted
+        .iter()
+        .flat_map(|e| e.rate_terms(p))
+        .map(|(_, g)| {
+            let mean = p.samples.dwell_mean(&g);
+            g.iter().map(|v| v - mean).collect()
+        })
+        .collect();
+    let terms: Vec<(&crate::path::PathLog, Option<&[f64]>)> = std::iter::once((exec, None))
+        .chain(centred.iter().map(|g| (exec, Some(g.as_slice()))))
+        .collect();
+    let nuisance: Vec<&[f64]> = cur
+        .ev
+        .names
+        .iter()
+        .zip(&cur.ev.cols)
+        .filter(|(n, _)| n.starts_with("nuisance"))
+        .map(|(_, c)| c.as_slice())
+        .collect();
+    let scan = p.scale_scan((hi + 0.5 * step) * s, &terms).ok()?;
+    let rss_at = |t: f64| -> Option<f64> {
+        let maps = scan.removals(t * s).ok()?;
+        let cols: Vec<Vec<f64>> = maps.iter().map(|m| p.compress(m)).collect();
+        let all: Vec<&[f64]> = cols
+            .iter()
+            .map(|c| c.as_slice())
+            .chain(nuisance.iter().copied())
+            .collect();
+        fit_columns(&all, &cur.ev.m, &cur.ev.w).ok().map(|f| f.rss)
+    };
+    let mut best: Option<(f64, f64)> = None;
+    // The scales of a pass are evaluated side by side and taken in the order given, so the
+    // best is the one the sequential scan would keep.
+    let consider = |ts: &[f64], best: &mut Option<(f64, f64)>| {
+        let got: Vec<Option<f64>> = ts
             .par_iter()
             .map(|&t| {
                 if (t - 1.0).abs() < 1e-9 || t * s < 0.5 || t * s > MAX_SCALE {
                     return None;
                 }
-                profiled_rss(cur, t)
+                rss_at(t)
             })
             .collect();
         for (&t, g) in ts.iter().zip(got) {
-            if let Some((rss, col)) = g {
+            if let Some(rss) = g {
                 if rss < base_rss && best.as_ref().is_none_or(|b| rss < b.1) {
-                    *best = Some((t, rss, col));
+                    *best = Some((t, rss));
                 }
             }
         }
@@ -144,6 +181,11 @@ pub fn scanned(cur: &Current) -> Option<Candidate> {
     if let Some(t0) = best.as_ref().map(|b| b.0) {
         consider(&[t0 - 0.5 * step, t0 + 0.5 * step], &mut best);
     }
+    // The best scale in full (the secant's column is the model's own at that scale).
+    let best = best.and_then(|(t, _)| {
+        let (rss, col) = profiled_rss(cur, t)?;
+        (rss < base_rss).then_some((t, rss, col))
+    });
     if std::env::var_os("BONNETLAB_TRACE").is_some() {
         eprintln!(
             "tif_scale: scanned in {:?}, best scale {:?}",
