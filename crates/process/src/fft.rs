@@ -750,7 +750,7 @@ impl MultiConvolver {
     /// `origin`: what [`Self::apply_sum_window_hinted`] gives for the same inputs and kernels.
     pub fn apply_spectra_window(
         &mut self,
-        pairs: &[(&[Complex<f64>], &[Complex<f64>])],
+        pairs: &[SpectrumPair],
         origin: (usize, usize),
         shape: (usize, usize),
     ) -> Array2<f64> {
@@ -889,6 +889,9 @@ fn load_padded(real: &mut [f64], n1: usize, input: ArrayView2<f64>, rows: usize,
 /// Most live columns for which [`MultiConvolver::apply_sum`] transforms an input column by
 /// column ([`Fft2::forward_columns`]: per column about an eighth of a full transform's work).
 const MAX_SPARSE_COLUMNS: usize = 4;
+
+/// An (input, kernel) pair of spectra for [`MultiConvolver::apply_spectra_window`].
+pub type SpectrumPair<'a> = (&'a [Complex<f64>], &'a [Complex<f64>]);
 
 /// An input of [`MultiConvolver::apply_sum_window_hinted`]: kernel index, map, and the rows
 /// that may hold anything (`None`: all).

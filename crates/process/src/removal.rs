@@ -585,6 +585,12 @@ impl std::fmt::Debug for FastRemoval {
     }
 }
 
+/// A dwell map's spectrum with the key of its kernel (see [`kernel_key`]).
+type KeyedSpectrum = ((usize, u32), Vec<Complex<f64>>);
+
+/// A kernel's spectrum.
+type KernelHat = Arc<Vec<Complex<f64>>>;
+
 /// The dwell side of removals (walk, splat by kernel, forward transforms) done once, for
 /// convolution with the kernels of other fields whose support is no wider than the field of
 /// the workspace that made them ([`FastRemoval::dwell_spectra`]): a scan of the TIF's width
@@ -598,7 +604,7 @@ pub struct DwellSpectra {
     half: (usize, usize),
     fft_shape: (usize, usize),
     /// Per term, per dwell map in target order: its kernel's key and its spectrum.
-    terms: Vec<Vec<((usize, u32), Vec<Complex<f64>>)>>,
+    terms: Vec<Vec<KeyedSpectrum>>,
 }
 
 impl std::fmt::Debug for DwellSpectra {
@@ -628,7 +634,7 @@ impl DwellSpectra {
         let (n0, n1) = self.fft_shape;
         let mut conv = MultiConvolver::with_fft_size(self.ext.rows, self.ext.cols, &[], n0, n1);
         // Each kernel built once for every term that has dwell on it.
-        let mut hats: Vec<((usize, u32), Arc<Vec<Complex<f64>>>)> = Vec::new();
+        let mut hats: Vec<((usize, u32), KernelHat)> = Vec::new();
         for &(key, _) in self.terms.iter().flatten() {
             if !hats.iter().any(|(k, _)| *k == key) {
                 let t = kernel_of(key, field, dx, dy, self.half)?;
@@ -640,7 +646,7 @@ impl DwellSpectra {
             .terms
             .iter()
             .map(|term| {
-                let pairs: Vec<(&[Complex<f64>], &[Complex<f64>])> = term
+                let pairs: Vec<crate::fft::SpectrumPair> = term
                     .iter()
                     .map(|(key, spec)| {
                         let hat = hats
@@ -1006,8 +1012,10 @@ impl FastRemoval {
         lines: &[Lines; 2],
     ) -> Result<Array2<f64>, ProcessError> {
         let plan = self.plan(lines);
-        let [sx, sy] =
-            self.phase_kernels([(plan.kind[0], &plan.wanted[0]), (plan.kind[1], &plan.wanted[1])])?;
+        let [sx, sy] = self.phase_kernels([
+            (plan.kind[0], &plan.wanted[0]),
+            (plan.kind[1], &plan.wanted[1]),
+        ])?;
         let (maps, hit) = self.splat(steps, lines, &plan);
         // Convolver index of each target with dwell.
         let mut idx = vec![usize::MAX; maps.len()];
@@ -1044,7 +1052,7 @@ impl FastRemoval {
         &mut self,
         steps: &[SubStep],
         lines: &[Lines; 2],
-    ) -> Vec<((usize, u32), Vec<Complex<f64>>)> {
+    ) -> Vec<KeyedSpectrum> {
         let plan = self.plan(lines);
         let (maps, hit) = self.splat(steps, lines, &plan);
         let nx = plan.wanted[0].len();
@@ -1059,7 +1067,10 @@ impl FastRemoval {
                     _ if t < 3 + nx => kernel_key(plan.kind[0], key(plan.wanted[0][t - 3])),
                     _ => kernel_key(plan.kind[1], key(plan.wanted[1][t - 3 - nx])),
                 };
-                Some((k, self.conv.input_spectrum(m.view(), Some(&hit[t].rows[..]))))
+                Some((
+                    k,
+                    self.conv.input_spectrum(m.view(), Some(&hit[t].rows[..])),
+                ))
             })
             .collect();
         self.back_to_pool(maps, &hit);

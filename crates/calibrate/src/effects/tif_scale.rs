@@ -4,7 +4,9 @@
 use rayon::prelude::*;
 
 use crate::effects::{Candidate, Current};
-use crate::model::{evaluate, fit, fit_columns, Channel, Effect, Linear, Param, Problem, MAX_SCALE};
+use crate::model::{
+    evaluate, fit, fit_columns, Channel, Effect, Linear, Param, Problem, MAX_SCALE,
+};
 
 #[derive(Debug, Clone)]
 pub struct TifScale {
