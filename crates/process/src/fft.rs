@@ -530,16 +530,27 @@ fn kernel_hat_with(
     tmp: &mut [Complex<f64>],
 ) -> Vec<Complex<f64>> {
     let (n0, n1) = fft.shape();
-    real.fill(0.0);
     let (k0, k1) = kernel.dim();
     let (c0, c1) = (k0 / 2, k1 / 2);
+    // The kernel's rows wrap to the first and last few rows of the transform; only those are
+    // written (zeroed first) and transformed ([`Fft2::forward_live`], the same bits as a full
+    // transform), the others are zero rows a full transform would run for nothing.
+    let row_of = |a: usize| (a as isize - c0 as isize).rem_euclid(n0 as isize) as usize;
+    let mut live = vec![false; n0];
+    for a in 0..k0 {
+        let i = row_of(a);
+        if !live[i] {
+            live[i] = true;
+            real[i * n1..(i + 1) * n1].fill(0.0);
+        }
+    }
     for ((a, b), &v) in kernel.indexed_iter() {
-        let i = (a as isize - c0 as isize).rem_euclid(n0 as isize) as usize;
+        let i = row_of(a);
         let j = (b as isize - c1 as isize).rem_euclid(n1 as isize) as usize;
         real[i * n1 + j] += v;
     }
     let mut hat = zeroed_dense(fft.spectrum_len());
-    fft.forward(real, tmp, &mut hat);
+    fft.forward_live(real, tmp, &mut hat, Some(&live));
     hat
 }
 

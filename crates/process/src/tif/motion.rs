@@ -191,18 +191,36 @@ fn box_kernel(
     } else {
         (cols, rows, dy_mm)
     };
+    // The field is 0 beyond its half-extent: lines across the motion farther out, and the
+    // pixels along a line whose box lies wholly beyond it, stay 0 without asking the field (a
+    // kernel sized for a wider footprint, as a scan of the TIF's width builds, is mostly such
+    // lines).
+    let (ex, ey) = field.half_extent_mm();
+    let (e_along, e_across) = if along_x { (ex, ey) } else { (ey, ex) };
     let mut t = Vec::with_capacity(len * SUB);
     let mut v = vec![0.0; len * SUB];
     let mut rate = Array2::zeros((rows, cols));
     for l in 0..lines {
+        let c = if along_x { y_of(l) } else { x_of(l) };
+        if c.abs() > e_across {
+            continue;
+        }
+        let inside = |p: usize| {
+            let centre = if along_x { x_of(p) } else { y_of(p) };
+            centre.abs() - 0.5 * h <= e_along
+        };
+        let Some(first) = (0..len).find(|&p| inside(p)) else {
+            continue;
+        };
+        let last = (0..len).rev().find(|&p| inside(p)).unwrap_or(first);
         t.clear();
-        for p in 0..len {
+        for p in first..=last {
             let centre = if along_x { x_of(p) } else { y_of(p) };
             t.extend((0..SUB).map(|k| centre + ((k as f64 + 0.5) / SUB as f64 - 0.5) * h));
         }
-        let c = if along_x { y_of(l) } else { x_of(l) };
-        field.rates_along(along_x, c, &t, &mut v);
-        for (p, chunk) in v.chunks_exact(SUB).enumerate() {
+        let v = &mut v[..t.len()];
+        field.rates_along(along_x, c, &t, v);
+        for (p, chunk) in (first..).zip(v.chunks_exact(SUB)) {
             let mean = chunk.iter().sum::<f64>() / SUB as f64;
             if along_x {
                 rate[(l, p)] = mean;
