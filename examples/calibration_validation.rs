@@ -12,6 +12,9 @@
 //!     [--no-time] [--signal]
 //! ```
 //!
+//! With `BONNETLAB_HARNESS_EFFECTS` set, each run also logs its accepted effects as the
+//! calibration's JSON writes them (every parameter with its uncertainty).
+//!
 //! `--signal` (a diagnostic, logged per run on stderr, not tabulated): the injected effect's
 //! identifiable signal, i.e. the effect run's after map minus its twin's without the effect (same
 //! seed: same part, noise and dropouts) with the baseline columns (rate scale, piston, tilt)
@@ -660,6 +663,12 @@ fn main() {
                         wall,
                         o.detail
                     );
+                    if std::env::var_os("BONNETLAB_HARNESS_EFFECTS").is_some() {
+                        eprintln!(
+                            "{kind} x{size} run {r}: effects {}",
+                            serde_json::to_string(&cal.effects).unwrap_or_default()
+                        );
+                    }
                     o
                 }
                 Err(e) => {
