@@ -93,11 +93,19 @@ pub fn footprint_radius_mm(field: &dyn RateField, step_mm: f64) -> Option<f64> {
     Some(far * step_mm)
 }
 
+/// Most memory a [`ScaleScan`]'s transformed dwell may take (bytes); beyond it the scan is
+/// refused (an error) and the caller evaluates each scale in full instead. At 800^2 a spectrum
+/// is about 6.5 MB and a raster's term holds a few (one per line phase), so this is tens of
+/// rate terms (a rate map's knots) there.
+pub const SCALE_SCAN_BYTES: usize = 512 << 20;
+
 /// Removals through the value channel at many widenings of one TIF, for a scan of the TIF
 /// scale: the dwell of each term (path, rate weights) is walked, splatted and transformed
 /// once, at the support of the widest scale, and each scale then costs its kernels'
 /// transforms and an inverse transform per term (see [`crate::removal::DwellSpectra`]). Each
-/// removal equals [`Channels::removal`] of a [`Channels`] at that scale up to rounding.
+/// removal equals [`Channels::removal`] of a [`Channels`] at that scale up to rounding (the
+/// line phases are found on the widest scale's grown grid: a phase exactly at a bin's edge
+/// may fall the other way).
 pub struct ScaleScan {
     base: Arc<dyn RateField + Send>,
     step_mm: f64,
@@ -127,7 +135,7 @@ impl ScaleScan {
         let step_mm = 0.1 * grid.dx_mm.min(grid.dy_mm);
         let widest = Derived::new(base.clone(), max_scale, Channel::Value, step_mm);
         let mut w = FastRemoval::from_field(&widest, grid)?;
-        let spectra = w.dwell_spectra(terms)?;
+        let spectra = w.dwell_spectra(terms, SCALE_SCAN_BYTES)?;
         Ok(ScaleScan {
             base,
             step_mm,
@@ -633,6 +641,11 @@ mod tests {
         }
         assert!(scan.removals(1.5).is_err());
         assert!(scan.removals(0.0).is_err());
+        // Over its memory budget the dwell's transform is refused, whole.
+        let widest = Derived::new(g.clone(), 1.45, Channel::Value, 0.025);
+        let mut w = FastRemoval::from_field(&widest, &grid).unwrap();
+        assert!(w.dwell_spectra(&terms, 1 << 10).is_err());
+        assert!(w.dwell_spectra(&terms, 1 << 30).is_ok());
     }
 
     /// Workspaces whose transforms run on the pool: one is kept while callers take one at a

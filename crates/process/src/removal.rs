@@ -913,22 +913,46 @@ impl FastRemoval {
     }
 
     /// The dwell side of the removals of `terms` (path, optional rate weights) at full
-    /// fidelity, transformed once (see [`DwellSpectra`]).
+    /// fidelity, transformed once (see [`DwellSpectra`]). An error, with nothing kept, once
+    /// the spectra would take more than `max_bytes` (a spectrum per dwell map with dwell: a
+    /// raster's line phases, or the phase nodes of a path whose lines spread, per term).
     pub fn dwell_spectra(
         &mut self,
         terms: &[(&PathLog, Option<&[f64]>)],
+        max_bytes: usize,
     ) -> Result<DwellSpectra, ProcessError> {
         let fidelity = self.fidelity;
         self.fidelity = Fidelity::Full;
-        let spectra: Result<Vec<_>, ProcessError> = terms
-            .iter()
-            .map(|(path, weights)| {
-                self.with_steps(path, *weights, |w, steps, lines| {
-                    w.dwell_spectra_of_steps(steps, lines)
-                })
-            })
-            .collect();
+        let spectrum_bytes = self.conv.fft().spectrum_len() * std::mem::size_of::<Complex<f64>>();
+        let mut spectra = Vec::with_capacity(terms.len());
+        let mut bytes = 0usize;
+        let mut failed = None;
+        for (path, weights) in terms {
+            match self.with_steps(path, *weights, |w, steps, lines| {
+                w.dwell_spectra_of_steps(steps, lines)
+            }) {
+                Ok(term) => {
+                    bytes += term.len() * spectrum_bytes;
+                    spectra.push(term);
+                    if bytes > max_bytes {
+                        failed = Some(ProcessError::invalid(format!(
+                            "the dwell spectra of {} terms would take more than {} MB",
+                            terms.len(),
+                            max_bytes >> 20
+                        )));
+                        break;
+                    }
+                }
+                Err(e) => {
+                    failed = Some(e);
+                    break;
+                }
+            }
+        }
         self.fidelity = fidelity;
+        if let Some(e) = failed {
+            return Err(e);
+        }
         let (n0, n1) = self.conv.fft().shape();
         Ok(DwellSpectra {
             grid: self.grid,
@@ -936,7 +960,7 @@ impl FastRemoval {
             h: self.h,
             half: self.half,
             fft_shape: (n0, n1),
-            terms: spectra?,
+            terms: spectra,
         })
     }
 

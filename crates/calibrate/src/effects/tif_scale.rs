@@ -120,8 +120,13 @@ pub fn scanned(cur: &Current) -> Option<Candidate> {
     let started = std::time::Instant::now();
     let (lo, hi, step) = SCAN;
     let n = ((hi - lo) / step).round() as usize;
-    let scan = ScanResiduals::new(cur, (hi + 0.5 * step) * s)?;
-    let rss_at = |t: f64| scan.rss(t * s);
+    // Where the scan cannot be set up (its transformed dwell over the memory budget: many
+    // accepted rate terms on a large map), each scale is evaluated in full.
+    let scan = ScanResiduals::new(cur, (hi + 0.5 * step) * s);
+    let rss_at = |t: f64| match &scan {
+        Some(sc) => sc.rss(t * s),
+        None => profiled_rss(cur, t).map(|(rss, _)| rss),
+    };
     let mut best: Option<(f64, f64)> = None;
     // The scales of a pass are evaluated side by side and taken in the order given, so the
     // best is the one the sequential scan would keep.
