@@ -514,7 +514,7 @@ impl Convolver {
 
 /// The half spectrum of `kernel` placed with its centre pixel `(k0 / 2, k1 / 2)` at the origin
 /// (wrapped), for a transform of `fft`'s size.
-fn kernel_hat(fft: &Fft2, kernel: ArrayView2<f64>) -> Vec<Complex<f64>> {
+pub(crate) fn kernel_hat(fft: &Fft2, kernel: ArrayView2<f64>) -> Vec<Complex<f64>> {
     let (n0, n1) = fft.shape();
     let mut real = zeroed_dense(n0 * n1);
     let mut tmp = zeroed_dense(fft.spectrum_len());

@@ -511,6 +511,8 @@ pub struct FastRemoval {
     pool: Vec<Array2<f64>>,
     /// Kernel spectra shared with the other workspaces of the same field and grid, if any.
     shared: Option<SharedSpectra>,
+    /// Spectra built ahead of their first use ([`Self::prebuild`]), taken by [`Self::spectrum`].
+    prebuilt: Vec<((usize, u32), KernelHat)>,
     /// How finely the next removals resolve a motion whose lines spread.
     fidelity: Fidelity,
 }
@@ -634,13 +636,13 @@ impl DwellSpectra {
         let (n0, n1) = self.fft_shape;
         let mut conv = MultiConvolver::with_fft_size(self.ext.rows, self.ext.cols, &[], n0, n1);
         // Each kernel built once for every term that has dwell on it.
-        let mut hats: Vec<((usize, u32), KernelHat)> = Vec::new();
+        let mut keys: Vec<(usize, u32)> = Vec::new();
         for &(key, _) in self.terms.iter().flatten() {
-            if !hats.iter().any(|(k, _)| *k == key) {
-                let t = kernel_of(key, field, dx, dy, self.half)?;
-                hats.push((key, conv.kernel_spectrum(t.rate_nm_per_s.view())));
+            if !keys.contains(&key) {
+                keys.push(key);
             }
         }
+        let hats = build_spectra(&keys, field, conv.fft(), &self.grid, self.half)?;
         let shape = (self.grid.rows, self.grid.cols);
         Ok(self
             .terms
@@ -718,6 +720,7 @@ impl FastRemoval {
             walk_phases: [Lines::Spread, Lines::Spread],
             pool: Vec::new(),
             shared: None,
+            prebuilt: Vec::new(),
             fidelity: Fidelity::Full,
         })
     }
@@ -754,6 +757,13 @@ impl FastRemoval {
         if let Some(hat) = self.shared.as_ref().and_then(|sh| sh.get(key)) {
             return Ok(hat);
         }
+        if let Some(n) = self.prebuilt.iter().position(|(k, _)| *k == key) {
+            let (_, hat) = self.prebuilt.swap_remove(n);
+            if let Some(sh) = &self.shared {
+                sh.put(key, &hat);
+            }
+            return Ok(hat);
+        }
         let t = build(
             self.field.as_ref(),
             self.grid.dx_mm,
@@ -765,6 +775,40 @@ impl FastRemoval {
             sh.put(key, &hat);
         }
         Ok(hat)
+    }
+
+    /// Builds the spectra of those `keys` ([`kernel_key`]s) that the next calls will build (not
+    /// held by this workspace, the shared spectra or an earlier prebuild) side by side, each a
+    /// field sampling and a transform with scratch of its own: the same bits as
+    /// [`Self::spectrum`] builds one at a time. The first removal of a path whose lines spread
+    /// needs up to [`PHASE_NODES`] phase kernels per motion at once.
+    fn prebuild(&mut self, keys: &[(usize, u32)]) -> Result<(), ProcessError> {
+        let held = |k: &(usize, u32)| match *k {
+            (m, 0) if m < 3 => self.base[m].is_some(),
+            (kind, q) => self.phases.iter().any(|e| e.kind == kind && e.q == q),
+        };
+        let mut todo: Vec<(usize, u32)> = keys
+            .iter()
+            .copied()
+            .filter(|k| {
+                !held(k)
+                    && !self.prebuilt.iter().any(|(p, _)| p == k)
+                    && self.shared.as_ref().is_none_or(|sh| sh.get(*k).is_none())
+            })
+            .collect();
+        todo.sort_unstable();
+        todo.dedup();
+        if todo.len() < 2 {
+            return Ok(());
+        }
+        self.prebuilt.extend(build_spectra(
+            &todo,
+            self.field.as_ref(),
+            self.conv.fft(),
+            &self.grid,
+            self.half,
+        )?);
+        Ok(())
     }
 
     /// Line-phase kernels built so far (each one a field sampling and a forward transform; a
@@ -890,6 +934,11 @@ impl FastRemoval {
                 }
             }
         }
+        let keys: Vec<(usize, u32)> = wanted
+            .iter()
+            .flat_map(|&(kind, phases)| phases.iter().map(move |&f| kernel_key(kind, key(f))))
+            .collect();
+        self.prebuild(&keys)?;
         let mut get = |kind: usize, phases: &[f64]| -> Result<Vec<usize>, ProcessError> {
             phases
                 .iter()
@@ -1041,6 +1090,11 @@ impl FastRemoval {
             (plan.kind[1], &plan.wanted[1]),
         ])?;
         let (maps, hit) = self.splat(steps, lines, &plan);
+        let base: Vec<(usize, u32)> = (0..3)
+            .filter(|&t| maps[t].is_some())
+            .map(|t| (t, 0))
+            .collect();
+        self.prebuild(&base)?;
         // Convolver index of each target with dwell.
         let mut idx = vec![usize::MAX; maps.len()];
         for (t, m) in maps.iter().enumerate() {
@@ -1255,6 +1309,28 @@ struct Plan {
     wanted: [Vec<f64>; 2],
     kind: [usize; 2],
     centred: [bool; 2],
+}
+
+/// The spectra of the kernels `keys` ([`kernel_key`]) of `field` on `grid`'s pixel with
+/// point-sampled half-widths `half`, for transforms of `fft`'s size: side by side, each with
+/// scratch of its own (the same bits as building them one at a time), in the order of `keys`.
+fn build_spectra(
+    keys: &[(usize, u32)],
+    field: &dyn RateField,
+    fft: &crate::fft::Fft2,
+    grid: &Grid,
+    half: (usize, usize),
+) -> Result<Vec<((usize, u32), KernelHat)>, ProcessError> {
+    use rayon::prelude::*;
+    keys.par_iter()
+        .map(|&key| {
+            let t = kernel_of(key, field, grid.dx_mm, grid.dy_mm, half)?;
+            Ok((
+                key,
+                Arc::new(crate::fft::kernel_hat(fft, t.rate_nm_per_s.view())),
+            ))
+        })
+        .collect()
 }
 
 /// The key of the kernel of motion `kind` at phase key `q` (phase 0 is the centred kernel of
@@ -1745,6 +1821,58 @@ mod tests {
         let second = f.removal(&p, None).unwrap();
         assert!(first.iter().any(|v| *v > 0.0));
         assert_eq!(first, second);
+    }
+
+    #[test]
+    fn kernels_built_side_by_side_are_the_ones_built_one_at_a_time() {
+        // `build_spectra` (the first removal of a path whose lines spread, the TIF-scale scan)
+        // against the convolver's own one-at-a-time build, whose scratch a wiggled raster's
+        // removal has just filled: every kind of kernel, bit for bit.
+        let grid = Grid::new(40, 50, 0.5, 0.5, 0.0, 0.0).unwrap();
+        let g = GaussianTif::new(2.0, 12.0, 3.0).unwrap();
+        let dgrid = grid.grown(16, 16);
+        let dens = Array2::from_elem((dgrid.rows, dgrid.cols), 0.3);
+        let r = RasterSpec::over_rect((-6.0, 31.0), (-6.0, 26.0), 1.7, 2.0);
+        let lim = crate::path::kinematics::Limits::default();
+        let (mut p, _) =
+            crate::path::kinematics::dwell_raster(&r, &dens, &dgrid, &lim, 0.2).unwrap();
+        let x = p.x_mm.clone();
+        for (y, x) in p.y_mm.iter_mut().zip(&x) {
+            *y += 0.3 * (2.0 * std::f64::consts::PI * x / 7.0).sin();
+        }
+        let mut f = FastRemoval::from_field(&g, &grid).unwrap();
+        assert!(f.removal(&p, None).unwrap().iter().any(|v| *v > 0.0));
+        let q = |ph: f64| (ph * PHASE_KEY_STEPS).round() as u32;
+        let keys = [
+            (0, 0),
+            (1, 0),
+            (2, 0),
+            (1, q(0.25)),
+            (2, q(0.375)),
+            (3, q(0.5)),
+            (4, q(0.875)),
+        ];
+        let side = build_spectra(&keys, f.field.as_ref(), f.conv.fft(), &f.grid, f.half).unwrap();
+        assert_eq!(side.len(), keys.len());
+        for ((key, hat), want) in side.iter().zip(keys) {
+            assert_eq!(*key, want);
+            let t = kernel_of(want, f.field.as_ref(), 0.5, 0.5, f.half).unwrap();
+            let one = f.conv.kernel_spectrum(t.rate_nm_per_s.view());
+            assert_eq!(hat.len(), one.len());
+            let same = hat
+                .iter()
+                .zip(one.iter())
+                .all(|(a, b)| a.re.to_bits() == b.re.to_bits() && a.im.to_bits() == b.im.to_bits());
+            assert!(same, "kernel {want:?} differs");
+        }
+        // A fresh workspace (its phase kernels built side by side) gives the removal of one
+        // whose kernels were already there.
+        let again = f.removal(&p, None).unwrap();
+        let fresh = FastRemoval::from_field(&g, &grid)
+            .unwrap()
+            .removal(&p, None)
+            .unwrap();
+        assert_eq!(again, fresh);
     }
 
     #[test]
