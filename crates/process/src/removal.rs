@@ -512,7 +512,7 @@ pub struct FastRemoval {
     /// Kernel spectra shared with the other workspaces of the same field and grid, if any.
     shared: Option<SharedSpectra>,
     /// Spectra built ahead of their first use ([`Self::prebuild`]), taken by [`Self::spectrum`].
-    prebuilt: Vec<((usize, u32), KernelHat)>,
+    prebuilt: Vec<KeyedHat>,
     /// How finely the next removals resolve a motion whose lines spread.
     fidelity: Fidelity,
 }
@@ -592,6 +592,9 @@ type KeyedSpectrum = ((usize, u32), Vec<Complex<f64>>);
 
 /// A kernel's spectrum.
 type KernelHat = Arc<Vec<Complex<f64>>>;
+
+/// A kernel's key ([`kernel_key`]) and its spectrum.
+type KeyedHat = ((usize, u32), KernelHat);
 
 /// The dwell side of removals (walk, splat by kernel, forward transforms) done once, for
 /// convolution with the kernels of other fields whose support is no wider than the field of
@@ -1320,7 +1323,7 @@ fn build_spectra(
     fft: &crate::fft::Fft2,
     grid: &Grid,
     half: (usize, usize),
-) -> Result<Vec<((usize, u32), KernelHat)>, ProcessError> {
+) -> Result<Vec<KeyedHat>, ProcessError> {
     use rayon::prelude::*;
     keys.par_iter()
         .map(|&key| {
