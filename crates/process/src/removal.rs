@@ -1801,16 +1801,22 @@ mod tests {
         assert!(2 * screen_ffts < full_ffts, "{screen_ffts} vs {full_ffts}");
     }
 
-    #[test]
-    fn fresh_large_dwell_maps_give_the_bits_of_pooled_ones() {
-        // Dwell maps beyond WRITTEN_ZEROS_BYTES come from fresh memory, their rows zeroed as the
-        // splat first reaches them; the second call takes them from the pool. A wiggled raster
-        // (phases spread: 19 maps) on 0.1 mm pixels (grown grid about 2.4 MB a map).
-        let grid = Grid::new(400, 560, 0.1, 0.1, 0.0, 0.0).unwrap();
-        let g = GaussianTif::new(2.0, 12.0, 3.0).unwrap();
-        let dgrid = grid.grown(70, 70);
+    /// A raster at a 1.7 mm pitch over `grid` and `margin_mm` beyond it (uniform dwell density
+    /// on the grid grown by `grow` pixels), wiggled 0.3 mm across its lines at a 7 mm period:
+    /// its lines' phases spread.
+    fn wiggled_raster(grid: &Grid, grow: usize, margin_mm: f64) -> PathLog {
+        let dgrid = grid.grown(grow, grow);
         let dens = Array2::from_elem((dgrid.rows, dgrid.cols), 0.3);
-        let r = RasterSpec::over_rect((-3.0, 59.0), (-3.0, 43.0), 1.7, 2.0);
+        let (w, h) = (
+            (grid.cols - 1) as f64 * grid.dx_mm,
+            (grid.rows - 1) as f64 * grid.dy_mm,
+        );
+        let r = RasterSpec::over_rect(
+            (grid.x0_mm - margin_mm, grid.x0_mm + w + margin_mm),
+            (grid.y0_mm - margin_mm, grid.y0_mm + h + margin_mm),
+            1.7,
+            2.0,
+        );
         let lim = crate::path::kinematics::Limits::default();
         let (mut p, _) =
             crate::path::kinematics::dwell_raster(&r, &dens, &dgrid, &lim, 0.2).unwrap();
@@ -1818,6 +1824,17 @@ mod tests {
         for (y, x) in p.y_mm.iter_mut().zip(&x) {
             *y += 0.3 * (2.0 * std::f64::consts::PI * x / 7.0).sin();
         }
+        p
+    }
+
+    #[test]
+    fn fresh_large_dwell_maps_give_the_bits_of_pooled_ones() {
+        // Dwell maps beyond WRITTEN_ZEROS_BYTES come from fresh memory, their rows zeroed as the
+        // splat first reaches them; the second call takes them from the pool. A wiggled raster
+        // (phases spread: 19 maps) on 0.1 mm pixels (grown grid about 2.4 MB a map).
+        let grid = Grid::new(400, 560, 0.1, 0.1, 0.0, 0.0).unwrap();
+        let g = GaussianTif::new(2.0, 12.0, 3.0).unwrap();
+        let p = wiggled_raster(&grid, 70, 3.0);
         let mut f = FastRemoval::from_field(&g, &grid).unwrap();
         assert!(8 * f.dwell_grid().rows * f.dwell_grid().cols > WRITTEN_ZEROS_BYTES);
         let first = f.removal(&p, None).unwrap();
@@ -1833,16 +1850,7 @@ mod tests {
         // removal has just filled: every kind of kernel, bit for bit.
         let grid = Grid::new(40, 50, 0.5, 0.5, 0.0, 0.0).unwrap();
         let g = GaussianTif::new(2.0, 12.0, 3.0).unwrap();
-        let dgrid = grid.grown(16, 16);
-        let dens = Array2::from_elem((dgrid.rows, dgrid.cols), 0.3);
-        let r = RasterSpec::over_rect((-6.0, 31.0), (-6.0, 26.0), 1.7, 2.0);
-        let lim = crate::path::kinematics::Limits::default();
-        let (mut p, _) =
-            crate::path::kinematics::dwell_raster(&r, &dens, &dgrid, &lim, 0.2).unwrap();
-        let x = p.x_mm.clone();
-        for (y, x) in p.y_mm.iter_mut().zip(&x) {
-            *y += 0.3 * (2.0 * std::f64::consts::PI * x / 7.0).sin();
-        }
+        let p = wiggled_raster(&grid, 16, 6.0);
         let mut f = FastRemoval::from_field(&g, &grid).unwrap();
         assert!(f.removal(&p, None).unwrap().iter().any(|v| *v > 0.0));
         let q = |ph: f64| (ph * PHASE_KEY_STEPS).round() as u32;
