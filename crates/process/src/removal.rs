@@ -757,11 +757,17 @@ impl FastRemoval {
         key: (usize, u32),
         build: impl FnOnce(&dyn RateField, f64, f64, (usize, usize)) -> Result<Tif, ProcessError>,
     ) -> Result<Arc<Vec<Complex<f64>>>, ProcessError> {
+        // A prebuilt spectrum is taken whichever source answers (another workspace may have
+        // shared the same key since): none is left behind.
+        let prebuilt = self
+            .prebuilt
+            .iter()
+            .position(|(k, _)| *k == key)
+            .map(|n| self.prebuilt.swap_remove(n).1);
         if let Some(hat) = self.shared.as_ref().and_then(|sh| sh.get(key)) {
             return Ok(hat);
         }
-        if let Some(n) = self.prebuilt.iter().position(|(k, _)| *k == key) {
-            let (_, hat) = self.prebuilt.swap_remove(n);
+        if let Some(hat) = prebuilt {
             if let Some(sh) = &self.shared {
                 sh.put(key, &hat);
             }
@@ -1124,6 +1130,8 @@ impl FastRemoval {
         let shape = (self.grid.rows, self.grid.cols);
         let out = self.conv.apply_sum_window_hinted(&views, self.h, shape);
         self.back_to_pool(maps, &hit);
+        // Every kernel this removal needed has taken its prebuilt spectrum; none is kept.
+        self.prebuilt.clear();
         Ok(out)
     }
 
@@ -1884,6 +1892,31 @@ mod tests {
             .removal(&p, None)
             .unwrap();
         assert_eq!(again, fresh);
+    }
+
+    #[test]
+    fn no_prebuilt_spectrum_outlives_its_removal() {
+        // Two workspaces sharing spectra: the second builds its kernels ahead, then the first
+        // shares the same keys before the second takes them (as two callers side by side can).
+        // The second's removal takes the shared ones, gives the same bits, and keeps nothing.
+        let grid = Grid::new(40, 50, 0.5, 0.5, 0.0, 0.0).unwrap();
+        let g = GaussianTif::new(2.0, 12.0, 3.0).unwrap();
+        let p = wiggled_raster(&grid, 16, 6.0);
+        let shared = SharedSpectra::default();
+        let mut a = FastRemoval::from_field(&g, &grid).unwrap();
+        let mut b = FastRemoval::from_field(&g, &grid).unwrap();
+        a.share_spectra(shared.clone());
+        b.share_spectra(shared);
+        let q = |ph: f64| (ph * PHASE_KEY_STEPS).round() as u32;
+        let keys: Vec<(usize, u32)> = (1..PHASE_NODES)
+            .map(|j| (1, q(j as f64 / PHASE_NODES as f64)))
+            .collect();
+        b.prebuild(&keys).unwrap();
+        assert_eq!(b.prebuilt.len(), keys.len());
+        let first = a.removal(&p, None).unwrap();
+        let second = b.removal(&p, None).unwrap();
+        assert!(b.prebuilt.is_empty(), "{} left", b.prebuilt.len());
+        assert_eq!(first, second);
     }
 
     #[test]
