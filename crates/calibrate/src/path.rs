@@ -43,6 +43,13 @@ impl Samples {
         (self.t_s[k] - self.t0_s) / (self.t1_s - self.t0_s).max(f64::MIN_POSITIVE)
     }
 
+    /// A per-sample quantity less its dwell-weighted mean (how rate terms enter the model: a
+    /// centred term leaves the baseline's rate scale alone).
+    pub fn centred(&self, q: &[f64]) -> Vec<f64> {
+        let mean = self.dwell_mean(q);
+        q.iter().map(|v| v - mean).collect()
+    }
+
     /// Dwell-weighted mean of a per-sample quantity.
     pub fn dwell_mean(&self, q: &[f64]) -> f64 {
         let (mut s, mut w) = (0.0, 0.0);

@@ -127,11 +127,7 @@ impl ScaleScan {
         max_scale: f64,
         terms: &[(&PathLog, Option<&[f64]>)],
     ) -> Result<ScaleScan, ProcessError> {
-        if !(max_scale.is_finite() && max_scale > 0.0) {
-            return Err(ProcessError::invalid(format!(
-                "TIF scale must be positive, got {max_scale}"
-            )));
-        }
+        positive_scale(max_scale)?;
         let step_mm = 0.1 * grid.dx_mm.min(grid.dy_mm);
         let widest = Derived::new(base.clone(), max_scale, Channel::Value, step_mm);
         let mut w = FastRemoval::from_field(&widest, grid)?;
@@ -155,6 +151,17 @@ impl ScaleScan {
         }
         let field = Derived::new(self.base.clone(), scale, Channel::Value, self.step_mm);
         self.spectra.removals(&field)
+    }
+}
+
+/// An error unless a TIF widening is finite and positive.
+fn positive_scale(scale: f64) -> Result<(), ProcessError> {
+    if scale.is_finite() && scale > 0.0 {
+        Ok(())
+    } else {
+        Err(ProcessError::invalid(format!(
+            "TIF scale must be positive, got {scale}"
+        )))
     }
 }
 
@@ -196,11 +203,7 @@ impl Channels {
         grid: &Grid,
         scale: f64,
     ) -> Result<Channels, ProcessError> {
-        if !(scale.is_finite() && scale > 0.0) {
-            return Err(ProcessError::invalid(format!(
-                "TIF scale must be positive, got {scale}"
-            )));
-        }
+        positive_scale(scale)?;
         let c = Channels {
             base,
             grid: *grid,

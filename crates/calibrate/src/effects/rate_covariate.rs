@@ -109,10 +109,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         let Some(q) = cur.p.covariates.get(name) else {
             continue;
         };
-        let centred = |q: &[f64]| -> Vec<f64> {
-            let mean = cur.p.samples.dwell_mean(q);
-            q.iter().map(|v| v - mean).collect()
-        };
+        let centred = |q: &[f64]| cur.p.samples.centred(q);
         let g = centred(q);
         if g.iter().all(|v| v.abs() < 1e-12) {
             continue;
@@ -228,10 +225,7 @@ pub fn local_height_candidates(cur: &Current) -> Vec<Candidate> {
     let p = cur.p;
     let pix = p.grid.dx_mm.max(p.grid.dy_mm);
     let comp = companions("height", cur);
-    let centred = |q: &[f64]| -> Vec<f64> {
-        let mean = p.samples.dwell_mean(q);
-        q.iter().map(|v| v - mean).collect()
-    };
+    let centred = |q: &[f64]| p.samples.centred(q);
     let comp_cols: Vec<Vec<f64>> = comp
         .iter()
         .filter_map(|c| p.covariates.get(c))

@@ -38,8 +38,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         return Vec::new();
     }
     let t = tau(cur.p);
-    let mean = cur.p.samples.dwell_mean(&t);
-    let g: Vec<f64> = t.iter().map(|v| v - mean).collect();
+    let g = cur.p.samples.centred(&t);
     let col = cur.column(&[(&g, Channel::Value)]);
     vec![Candidate {
         key: "rate_drift".into(),

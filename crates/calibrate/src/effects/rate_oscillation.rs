@@ -95,11 +95,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     for (period, _) in spectral_peaks(&t, &h, 4.0 * pix / mean_feed.max(1e-9), duration / 2.5, 3) {
         let cols: Vec<Vec<f64>> = terms(p, period)
             .iter()
-            .map(|(_, g)| {
-                let m = s.dwell_mean(g);
-                let gc: Vec<f64> = g.iter().map(|v| v - m).collect();
-                cur.column(&[(&gc, Channel::Value)])
-            })
+            .map(|(_, g)| cur.column(&[(&s.centred(g), Channel::Value)]))
             .collect();
         out.push(Candidate {
             key: "rate_oscillation".into(),

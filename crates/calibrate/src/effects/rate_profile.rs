@@ -58,11 +58,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let s = &cur.p.samples;
     let cols = hats(cur.p)
         .iter()
-        .map(|(_, g)| {
-            let m = s.dwell_mean(g);
-            let gc: Vec<f64> = g.iter().map(|v| v - m).collect();
-            cur.column(&[(&gc, Channel::Value)])
-        })
+        .map(|(_, g)| cur.column(&[(&s.centred(g), Channel::Value)]))
         .collect();
     vec![Candidate {
         key: "rate_profile_time".into(),

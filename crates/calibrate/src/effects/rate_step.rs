@@ -167,9 +167,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     }
     let at = best.1;
     let g = step(p, at);
-    let m = s.dwell_mean(&g);
-    let gc: Vec<f64> = g.iter().map(|v| v - m).collect();
-    let col = cur.column(&[(&gc, Channel::Value)]);
+    let col = cur.column(&[(&s.centred(&g), Channel::Value)]);
     vec![Candidate {
         key: "rate_step".into(),
         kind: "rate_step",

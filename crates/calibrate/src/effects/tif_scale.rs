@@ -204,10 +204,7 @@ impl<'a> ScanResiduals<'a> {
             .accepted
             .iter()
             .flat_map(|e| e.rate_terms(p))
-            .map(|(_, g)| {
-                let mean = p.samples.dwell_mean(&g);
-                g.iter().map(|v| v - mean).collect()
-            })
+            .map(|(_, g)| p.samples.centred(&g))
             .collect();
         let terms: Vec<(&crate::path::PathLog, Option<&[f64]>)> = std::iter::once((exec, None))
             .chain(centred.iter().map(|g| (exec, Some(g.as_slice()))))
