@@ -40,6 +40,7 @@ use bonnetlab::calibrate::run::{calibrate, Calibration, Options};
 use bonnetlab::calibrate::synth::{
     generate, InitialSurface, Injected, SynthConfig, Waveform, WiggleCoord,
 };
+use bonnetlab::process::pixel::PixelSampling;
 use bonnetlab::surface::rng::Rng;
 
 /// Library kinds (offered to the selection) and kinds the library does not have.
@@ -74,6 +75,8 @@ struct Args {
     signal: bool,
     /// Map pixels as the mean of n x n point samples over the pixel (1: point samples).
     pixel_average: usize,
+    /// How calibrate takes the pixels (`--pixels point|area`, a recipe's `[measurement] pixels`).
+    pixels: PixelSampling,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -91,6 +94,7 @@ fn parse_args() -> Result<Args, String> {
         time: true,
         signal: false,
         pixel_average: 1,
+        pixels: PixelSampling::Point,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -113,6 +117,11 @@ fn parse_args() -> Result<Args, String> {
                 a.pixel_average = val()?
                     .parse()
                     .map_err(|e| format!("--pixel-average: {e}"))?
+            }
+            "--pixels" => {
+                let v = val()?;
+                a.pixels = PixelSampling::from_name(&v)
+                    .ok_or(format!("--pixels: \"point\" or \"area\", got {v}"))?
             }
             other => return Err(format!("unknown option {other}")),
         }
@@ -481,10 +490,11 @@ fn signal(
     kind: &str,
     run: &bonnetlab::calibrate::synth::SynthRun,
     twin: &bonnetlab::calibrate::synth::SynthRun,
+    pixels: PixelSampling,
 ) -> Result<String, String> {
     use bonnetlab::calibrate::effects::{candidates, Current};
     use bonnetlab::calibrate::model::{evaluate, fit};
-    let p = run.problem().map_err(|e| e.to_string())?;
+    let p = run.problem_seen(pixels).map_err(|e| e.to_string())?;
     let ev = evaluate(&p, &[], None).map_err(|e| e.to_string())?;
     let f = fit(&ev, &[]).map_err(|e| e.to_string())?;
     // d = removal(effect) - removal(twin) = twin.after - run.after (same before map).
@@ -613,14 +623,15 @@ fn main() {
                 match generate(&twin) {
                     Ok(tw) => eprintln!(
                         "{kind} x{size} run {r}: signal {}",
-                        signal(kind, &run, &tw).unwrap_or_else(|e| format!("failed: {e}"))
+                        signal(kind, &run, &tw, args.pixels)
+                            .unwrap_or_else(|e| format!("failed: {e}"))
                     ),
                     Err(e) => eprintln!("{kind} x{size} run {r}: twin: {e}"),
                 }
             }
             let t = Instant::now();
             let res = run
-                .problem()
+                .problem_seen(args.pixels)
                 .and_then(|p| calibrate(&p, &Options::default()));
             let wall = t.elapsed().as_secs_f64();
             let o = match res {
@@ -718,7 +729,7 @@ fn report(
             format!(" --pixel-average {}", args.pixel_average)
         } else {
             String::new()
-        },
+        } + if args.pixels == PixelSampling::Area { " --pixels area" } else { "" },
         args.runs,
         args.size,
         args.size,

@@ -22,6 +22,7 @@ use ndarray::Array2;
 use rayon::prelude::*;
 
 use bonnetlab_process::channels::{Channels, ScaleScan};
+use bonnetlab_process::pixel::PixelResponse;
 use bonnetlab_process::removal::Fidelity;
 pub use bonnetlab_process::tif::derived::Channel;
 
@@ -457,7 +458,12 @@ impl Problem {
                 return Ok(k);
             }
         }
-        let set = Arc::new(Channels::new(self.tif.field(), &self.grid, scale)?);
+        let set = Arc::new(Channels::seen(
+            self.tif.field(),
+            &self.grid,
+            scale,
+            self.response(),
+        )?);
         if let Ok(mut cache) = self.kernels.lock() {
             if cache.len() >= self.max_kernel_sets() {
                 cache.remove(0);
@@ -479,7 +485,13 @@ impl Problem {
             &self.grid,
             max_scale.min(MAX_SCALE),
             terms,
+            self.response(),
         )?)
+    }
+
+    /// How the maps' pixels see the removal (the TIF's pixel sampling at the map pixel).
+    pub fn response(&self) -> PixelResponse {
+        self.tif.pixels().response(self.grid.dx_mm, self.grid.dy_mm)
     }
 
     /// Channel sets kept (see [`KERNEL_CACHE_BYTES`]).

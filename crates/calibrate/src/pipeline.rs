@@ -5,6 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
+use bonnetlab_process::pixel::PixelSampling;
 use bonnetlab_process::recipe::{Recipe, TifSource};
 use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::PathLog;
@@ -48,9 +49,22 @@ pub fn problem_from_parts(
     spot: Option<&Surface>,
     path: &PathLog,
 ) -> Result<Problem, CalibrateError> {
+    problem_from_parts_seen(before, after, tif, spot, path, PixelSampling::Point)
+}
+
+/// [`problem_from_parts`] for maps and spot whose pixels sample the removal as `pixels` says
+/// (a recipe's `[measurement] pixels`).
+pub fn problem_from_parts_seen(
+    before: &Surface,
+    after: &Surface,
+    tif: &TifSource,
+    spot: Option<&Surface>,
+    path: &PathLog,
+    pixels: PixelSampling,
+) -> Result<Problem, CalibrateError> {
     let (dx, dy) = before.pixel_mm("calibration")?;
-    let tool = ToolModel::from_source(tif, spot, dx, dy)?;
-    Problem::new(before, after, &TifMap::new(tool), path)
+    let tool = ToolModel::from_source_seen(tif, spot, dx, dy, pixels)?;
+    Problem::new(before, after, &TifMap::seen(tool, pixels), path)
 }
 
 /// A measured-spot run's problem (the common case of the synthetic runs).
@@ -100,7 +114,7 @@ pub fn load_recipe(recipe_path: &Path) -> Result<Problem, PipelineError> {
     let (dx, dy) = before
         .pixel_mm("calibration")
         .map_err(|e| PipelineError::input(&recipe.before, e))?;
-    let tool = ToolModel::from_source(&recipe.tif, spot.as_ref(), dx, dy)
+    let tool = ToolModel::from_source_seen(&recipe.tif, spot.as_ref(), dx, dy, recipe.pixels)
         .map_err(|e| PipelineError::input(&spot_file, e))?;
     // Samples outside the part plus the spot are refused here, before any grid is built from
     // the path (the same check as `simulate`).
@@ -113,7 +127,7 @@ pub fn load_recipe(recipe_path: &Path) -> Result<Problem, PipelineError> {
         tool.field().half_extent_mm(),
     )
     .map_err(|e| PipelineError::input(&recipe.path_log, e))?;
-    Problem::new(&before, &after, &TifMap::new(tool), &path).map_err(|e| match e {
+    Problem::new(&before, &after, &TifMap::seen(tool, recipe.pixels), &path).map_err(|e| match e {
         CalibrateError::Processing(m) => PipelineError {
             file: recipe_path.to_path_buf(),
             message: m,

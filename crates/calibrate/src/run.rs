@@ -131,6 +131,9 @@ pub struct Calibration {
     pub noise_floor_axis: String,
     /// The band the process can produce (radial cycles/mm below the cutoff).
     pub process_band: ProcessBand,
+    /// How the model took the maps' and the spot's pixels (`point` or `area`, the recipe's
+    /// `[measurement] pixels`).
+    pub pixels: String,
     pub effects: Vec<EffectReport>,
     pub unexplained: Vec<Unexplained>,
     /// Strongly correlated parameters of different accepted effects (joint refit).
@@ -793,6 +796,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         noise_floor_band_per_mm: floor_band,
         noise_floor_axis: floor_axis,
         process_band: band,
+        pixels: p.tif.pixels().name().to_string(),
         effects: reports,
         unexplained,
         correlations,

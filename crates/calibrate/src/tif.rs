@@ -5,6 +5,7 @@
 
 use std::sync::Arc;
 
+use bonnetlab_process::pixel::PixelSampling;
 use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::tif::RateField;
 
@@ -12,6 +13,8 @@ use bonnetlab_process::tif::RateField;
 #[derive(Clone)]
 pub struct TifMap {
     tool: Arc<ToolModel>,
+    /// How the maps' pixels sample the removal (the forward model's kernels see it).
+    pixels: PixelSampling,
 }
 
 impl std::fmt::Debug for TifMap {
@@ -24,9 +27,20 @@ impl std::fmt::Debug for TifMap {
 impl TifMap {
     /// The calibration's view of a run's tool model.
     pub fn new(tool: ToolModel) -> TifMap {
+        TifMap::seen(tool, PixelSampling::Point)
+    }
+
+    /// The view of maps whose pixels sample the removal as `pixels` says.
+    pub fn seen(tool: ToolModel, pixels: PixelSampling) -> TifMap {
         TifMap {
             tool: Arc::new(tool),
+            pixels,
         }
+    }
+
+    /// How the maps' pixels sample the removal.
+    pub fn pixels(&self) -> PixelSampling {
+        self.pixels
     }
 
     /// The tool model.

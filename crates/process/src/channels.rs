@@ -16,6 +16,7 @@ use crate::fft::{fast_len, Convolver};
 use crate::grid::Grid;
 use crate::interp::bilinear;
 use crate::path::PathLog;
+use crate::pixel::{PixelMean, PixelResponse};
 use crate::removal::{FastRemoval, Fidelity, SharedSpectra};
 use crate::tif::derived::{Channel, Derived};
 use crate::tif::{RateField, Tif};
@@ -46,6 +47,8 @@ pub struct Channels {
     fast: [Pool; 4],
     /// Idle matched-filter convolvers per channel (taken like the workspaces).
     adjoint: [Mutex<Vec<Adjoint>>; 4],
+    /// How the map's pixels see the removal (every channel's kernels, on any grid).
+    response: PixelResponse,
     /// The derivative channels' screening companion (see [`Self::screening_grid`]), built on
     /// first use; `None` where the map pixel is not fine against the footprint.
     coarse: std::sync::OnceLock<Option<Box<Channels>>>,
@@ -120,17 +123,19 @@ impl std::fmt::Debug for ScaleScan {
 }
 
 impl ScaleScan {
-    /// The scan of `terms` on `grid` for widenings up to `max_scale` (> 0).
+    /// The scan of `terms` on `grid` for widenings up to `max_scale` (> 0), for maps whose
+    /// pixels sample the removal as `response` says.
     pub fn new(
         base: Arc<dyn RateField + Send>,
         grid: &Grid,
         max_scale: f64,
         terms: &[(&PathLog, Option<&[f64]>)],
+        response: PixelResponse,
     ) -> Result<ScaleScan, ProcessError> {
         positive_scale(max_scale)?;
         let step_mm = 0.1 * grid.dx_mm.min(grid.dy_mm);
         let widest = Derived::new(base.clone(), max_scale, Channel::Value, step_mm);
-        let mut w = FastRemoval::from_field(&widest, grid)?;
+        let mut w = FastRemoval::from_field_seen(&widest, grid, response)?;
         let spectra = w.dwell_spectra(terms, SCALE_SCAN_BYTES)?;
         Ok(ScaleScan {
             base,
@@ -197,11 +202,21 @@ impl std::fmt::Debug for Channels {
 }
 
 impl Channels {
-    /// Channels of `base` widened by `scale` (> 0) on `grid`.
+    /// Channels of `base` widened by `scale` (> 0) on `grid`, for maps of point samples.
     pub fn new(
         base: Arc<dyn RateField + Send>,
         grid: &Grid,
         scale: f64,
+    ) -> Result<Channels, ProcessError> {
+        Channels::seen(base, grid, scale, PixelResponse::Point)
+    }
+
+    /// [`Self::new`] for maps whose pixels sample the removal as `response` says.
+    pub fn seen(
+        base: Arc<dyn RateField + Send>,
+        grid: &Grid,
+        scale: f64,
+        response: PixelResponse,
     ) -> Result<Channels, ProcessError> {
         positive_scale(scale)?;
         let c = Channels {
@@ -213,6 +228,7 @@ impl Channels {
             fast: Default::default(),
             adjoint: Default::default(),
             coarse: Default::default(),
+            response,
         };
         drop(c.workspace(Channel::Value)?);
         Ok(c)
@@ -249,7 +265,7 @@ impl Channels {
         self.coarse
             .get_or_init(|| {
                 let grid = self.screening_grid()?;
-                Channels::new(self.base.clone(), &grid, self.scale)
+                Channels::seen(self.base.clone(), &grid, self.scale, self.response)
                     .ok()
                     .map(Box::new)
             })
@@ -348,7 +364,7 @@ impl Channels {
                 return Ok(Workspace { pool, w: Some(w) });
             }
         }
-        let mut w = FastRemoval::from_field(&self.field(ch), &self.grid)?;
+        let mut w = FastRemoval::from_field_seen(&self.field(ch), &self.grid, self.response)?;
         w.share_spectra(pool.spectra.clone());
         let mut st = lock(&pool.state)?;
         st.lent += 1;
@@ -492,7 +508,11 @@ impl Channels {
             Some(a) => a,
             None => {
                 let ext = *self.workspace(Channel::Value)?.get().dwell_grid();
-                let kern = Tif::sample(&self.field(ch), self.grid.dx_mm, self.grid.dy_mm)?;
+                let kern = Tif::sample(
+                    &PixelMean::new(self.field(ch), self.response),
+                    self.grid.dx_mm,
+                    self.grid.dy_mm,
+                )?;
                 let offset = (
                     ((self.grid.y0_mm - ext.y0_mm) / ext.dy_mm).round() as usize,
                     ((self.grid.x0_mm - ext.x0_mm) / ext.dx_mm).round() as usize,
@@ -630,7 +650,7 @@ mod tests {
         .unwrap();
         let terms: Vec<(&PathLog, Option<&[f64]>)> =
             vec![(&path, None), (&path, Some(&weights)), (&wiggled, None)];
-        let scan = ScaleScan::new(g.clone(), &grid, 1.45, &terms).unwrap();
+        let scan = ScaleScan::new(g.clone(), &grid, 1.45, &terms, PixelResponse::Point).unwrap();
         for scale in [0.6, 1.0, 1.37, 1.45] {
             let got = scan.removals(scale).unwrap();
             let c = Channels::new(g.clone(), &grid, scale).unwrap();

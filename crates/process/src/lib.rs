@@ -16,6 +16,7 @@ pub mod memory;
 pub mod modulated;
 pub mod path;
 pub mod perturb;
+pub mod pixel;
 pub mod recipe;
 pub mod removal;
 pub mod simulate;

@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 use toml::Table;
 
 use crate::error::ProcessError;
+use crate::pixel::PixelSampling;
 use crate::tif::{BonnetTifParams, GaussianTif, PressureProfile, RateScale};
 
 /// Where the TIF comes from.
@@ -59,6 +60,8 @@ pub struct Recipe {
     pub process: ProcessParams,
     /// The raw `[vibration]` table, when present.
     pub vibration: Option<Table>,
+    /// How the maps' and the spot's pixels sample the surface (`[measurement] pixels`).
+    pub pixels: PixelSampling,
 }
 
 /// The recipe document as written, every table typed and strict (unknown tables and keys are
@@ -85,6 +88,8 @@ pub struct RecipeDoc {
 pub struct MeasurementTable {
     pub before: Option<String>,
     pub after: Option<String>,
+    /// How the instrument's pixels sample the surface: `point` (the default) or `area`.
+    pub pixels: Option<String>,
 }
 
 /// `[tif]`: a measured spot (`spot`, `dwell_s`) or a `model`.
@@ -251,6 +256,15 @@ impl Recipe {
             .file_path(m.before.as_ref())
             .ok_or_else(|| cx.err("[measurement] before", "missing"))?;
         let after = cx.file_path(m.after.as_ref());
+        let pixels = match m.pixels.as_deref() {
+            None => PixelSampling::Point,
+            Some(name) => PixelSampling::from_name(name).ok_or_else(|| {
+                cx.err(
+                    "[measurement] pixels",
+                    format!("must be \"point\" or \"area\", got \"{name}\""),
+                )
+            })?,
+        };
 
         let pt = doc.process.clone().unwrap_or_default();
         let process = ProcessParams {
@@ -299,6 +313,7 @@ impl Recipe {
             pitch_mm,
             process,
             vibration: doc.vibration,
+            pixels,
         })
     }
 }
@@ -513,6 +528,19 @@ k1_n_per_mm = 1476.0
     }
 
     #[test]
+    fn pixels_default_to_points_and_read_area() {
+        let r = Recipe::parse(FULL, Path::new("r.toml")).unwrap();
+        assert_eq!(r.pixels, PixelSampling::Point);
+        let text = FULL.replace(
+            "before = \"before.dat\"",
+            "before = \"before.dat\"\npixels = \"area\"",
+        );
+        assert_ne!(text, FULL);
+        let r = Recipe::parse(&text, Path::new("r.toml")).unwrap();
+        assert_eq!(r.pixels, PixelSampling::Area);
+    }
+
+    #[test]
     fn errors_name_file_and_key() {
         let cases = [
             (
@@ -537,6 +565,13 @@ k1_n_per_mm = 1476.0
                 "[tif",
             ),
             (FULL.replace("[path]", "[path"), "TOML"),
+            (
+                FULL.replace(
+                    "before = \"before.dat\"",
+                    "before = \"before.dat\"\npixels = \"mean\"",
+                ),
+                "[measurement] pixels",
+            ),
         ];
         for (text, key) in cases {
             let e = Recipe::parse(&text, Path::new("runs/r.toml"))

@@ -12,6 +12,7 @@ use ndarray::Array2;
 use crate::error::ProcessError;
 use crate::grid::Grid;
 use crate::path::PathLog;
+use crate::pixel::PixelSampling;
 use crate::recipe::TifSource;
 use crate::removal::{deposit_exact, ExactOptions, FastRemoval};
 use crate::tif::bonnet::BonnetTif;
@@ -84,11 +85,27 @@ impl ToolModel {
         dx_mm: f64,
         dy_mm: f64,
     ) -> Result<ToolModel, ProcessError> {
+        ToolModel::from_source_seen(src, spot, dx_mm, dy_mm, PixelSampling::Point)
+    }
+
+    /// [`Self::from_source`] for a spot map whose pixels sample the removal as `pixels` says
+    /// (see [`SpotOptions::pixels`]).
+    pub fn from_source_seen(
+        src: &TifSource,
+        spot: Option<&Surface>,
+        dx_mm: f64,
+        dy_mm: f64,
+        pixels: PixelSampling,
+    ) -> Result<ToolModel, ProcessError> {
         Ok(match src {
             TifSource::Spot { dwell_s, .. } => {
                 let s =
                     spot.ok_or_else(|| ProcessError::invalid("a measured TIF needs its spot map"))?;
-                let m = MeasuredTif::from_spot(s, *dwell_s, &SpotOptions::default())?;
+                let o = SpotOptions {
+                    pixels,
+                    ..SpotOptions::default()
+                };
+                let m = MeasuredTif::from_spot(s, *dwell_s, &o)?;
                 check_footprint(&m, dx_mm, dy_mm)?;
                 ToolModel::Measured(Tif::sample(&m, dx_mm, dy_mm)?, Box::new(m))
             }

@@ -210,7 +210,9 @@ pub struct SynthConfig {
     /// How a map pixel sees the surface: 1 (or 0) a point sample at its centre; n, the mean
     /// of n x n point samples spread evenly over the pixel's square (a camera pixel integrates
     /// the fringe over its area: content above the map's Nyquist is attenuated by the pixel's
-    /// sinc instead of folding back in full). The measured spot's pixels too, over their own
+    /// sinc instead of folding back in full). The removal is then deposited exactly at the
+    /// sub-samples themselves (a grid n times finer: n^2 the deposition's cost), not
+    /// interpolated between pixel centres. The measured spot's pixels too, over their own
     /// pixel (`spot_pixel_mm`).
     pub pixel_average: usize,
     pub tif: TrueTif,
@@ -395,12 +397,25 @@ impl SynthRun {
     /// The calibration problem of this run, built as the CLI builds it from a run directory
     /// (`pipeline::problem_with_spot`: the measured spot, its dwell and the path log).
     pub fn problem(&self) -> Result<crate::model::Problem, CalibrateError> {
-        crate::pipeline::problem_with_spot(
+        self.problem_seen(bonnetlab_process::pixel::PixelSampling::Point)
+    }
+
+    /// [`Self::problem`] with the maps' and the spot's pixels taken to sample as `pixels`
+    /// says (a recipe's `[measurement] pixels`).
+    pub fn problem_seen(
+        &self,
+        pixels: bonnetlab_process::pixel::PixelSampling,
+    ) -> Result<crate::model::Problem, CalibrateError> {
+        crate::pipeline::problem_from_parts_seen(
             &self.before,
             &self.after,
-            &self.spot,
-            self.spot_dwell_s,
+            &bonnetlab_process::recipe::TifSource::Spot {
+                path: std::path::PathBuf::from("spot"),
+                dwell_s: self.spot_dwell_s,
+            },
+            Some(&self.spot),
             &self.path,
+            pixels,
         )
     }
 }
@@ -895,9 +910,25 @@ pub fn generate_with(
         rate_map,
     };
 
-    // Exact deposition on the map grid grown so that misregistered samples stay inside.
+    // Exact deposition on the map grid grown so that misregistered samples stay inside; with
+    // `pixel_average` n, on a grid n times finer whose nodes are the pixels' sub-samples, so a
+    // pixel's mean is the mean of the exact removal there, not of an interpolant between pixel
+    // centres (which misses a square-root rim's detail between them).
+    let na = cfg.pixel_average.max(1);
     let grow = (reach / d).ceil() as usize + 3;
-    let rgrid = grid.grown(grow, grow);
+    let rgrid = {
+        let g = grid.grown(grow, grow);
+        let f = na as f64;
+        bonnetlab_process::Grid::new(
+            g.rows * na,
+            g.cols * na,
+            g.dx_mm / f,
+            g.dy_mm / f,
+            g.x0_mm + (0.5 / f - 0.5) * g.dx_mm,
+            g.y0_mm + (0.5 / f - 0.5) * g.dy_mm,
+        )
+        .map_err(|e| CalibrateError::InvalidInput(e.to_string()))?
+    };
     let removal = deposition.deposit(&motion, field.as_ref(), &rgrid, &|s| {
         ctx.modulation(&cfg.effects, s, &motion)
     })?;
@@ -908,7 +939,6 @@ pub fn generate_with(
 
     // Before map: truth at the map's pixel centres (or averaged over each pixel, see
     // `pixel_average`). After map: truth minus removal at the misregistered positions.
-    let na = cfg.pixel_average.max(1);
     let offsets = pixel_offsets(na, grid.dx_mm, grid.dy_mm);
     let pixel_mean = |f: &dyn Fn(f64, f64) -> f64, x: f64, y: f64| -> f64 {
         offsets
@@ -1042,9 +1072,14 @@ pub fn generate_with(
     spot.provenance.format = "synthetic".into();
     spot.origin_mm = (-(half as f64) * sd, -(half as f64) * sd);
 
-    let true_removal_nm = removal
-        .slice(ndarray::s![grow..grow + cfg.rows, grow..grow + cfg.cols])
-        .to_owned();
+    // At the map's pixels: each pixel's n x n sub-samples averaged (n = 1: its centre).
+    let true_removal_nm = Array2::from_shape_fn((cfg.rows, cfg.cols), |(i, j)| {
+        let (i0, j0) = ((grow + i) * na, (grow + j) * na);
+        removal
+            .slice(ndarray::s![i0..i0 + na, j0..j0 + na])
+            .mean()
+            .unwrap_or(0.0)
+    });
     Ok(SynthRun {
         before: mk(before, vb, "before")?,
         after: mk(after, va, "after")?,

@@ -43,6 +43,7 @@ use super::spotfit::{fit_shape, fit_smooth, FitStart, SmoothShape};
 use super::{RateField, Tif};
 use crate::error::ProcessError;
 use crate::interp::{catmull_rom_across, catmull_rom_on_line};
+use crate::pixel::PixelSampling;
 use bonnetlab_surface::fill::fill_invalid;
 use bonnetlab_surface::form::{evaluate_fit, fit_terms};
 use bonnetlab_surface::{Surface, Term};
@@ -58,6 +59,10 @@ pub struct SpotOptions {
     pub max_radius_mm: Option<f64>,
     /// How the footprint between the spot's pixels (its rim above all) is reconstructed.
     pub rim: Rim,
+    /// How the spot map's pixels sample the removal: with [`PixelSampling::Area`] the fitted
+    /// shape is compared with the spot as means over its pixels, so the field is the TIF
+    /// itself, not the TIF blurred by one spot pixel.
+    pub pixels: PixelSampling,
 }
 
 /// How a measured TIF is reconstructed between the spot's pixels.
@@ -132,6 +137,7 @@ impl Default for SpotOptions {
             pixel_mm: None,
             max_radius_mm: None,
             rim: Rim::default(),
+            pixels: PixelSampling::Point,
         }
     }
 }
@@ -345,7 +351,8 @@ impl MeasuredTif {
                 a_mm: support,
             };
             let describes = |residual: f64, data: f64| model_describes_spot(residual, data, noise);
-            let fitted = fit_shape(&rate, valid, dx, dy, start, window, 4)
+            let response = o.pixels.response(dx, dy);
+            let fitted = fit_shape(&rate, valid, (dx, dy), start, window, 4, response)
                 .filter(|f| describes(f.residual_rms, f.data_rms))
                 .map(|f| {
                     let azimuths = f.shape.azimuths();
@@ -356,7 +363,7 @@ impl MeasuredTif {
                     (m, f.centre, f.residual_rms, f.pixels)
                 })
                 .or_else(|| {
-                    fit_smooth(&rate, valid, dx, dy, start, window)
+                    fit_smooth(&rate, valid, (dx, dy), start, window, response)
                         .filter(|f| describes(f.residual_rms, f.data_rms))
                         .map(|f| {
                             (
@@ -373,7 +380,8 @@ impl MeasuredTif {
                 let significant = residual_is_significant(residual, noise, pixels);
                 if o.rim == Rim::ModelPlusResidual && significant {
                     rate = Array2::from_shape_fn((rows, cols), |(i, j)| {
-                        rate[(i, j)] - m.rate_at((j as f64 - v0) * dx, (i as f64 - u0) * dy)
+                        let (x, y) = ((j as f64 - v0) * dx, (i as f64 - u0) * dy);
+                        rate[(i, j)] - response.mean_of(x, y, |u, v| m.rate_at(u, v))
                     });
                 } else {
                     rate.fill(0.0);

@@ -31,6 +31,7 @@ use ndarray::Array2;
 use rayon::prelude::*;
 
 use super::bonnet::BonnetShape;
+use crate::pixel::PixelResponse;
 use bonnetlab_surface::lm::{minimize, LmProblem, LmSettings};
 
 /// A fitted shape (the bonnet's by default, or a [`SmoothShape`]) with its centre and how well
@@ -110,23 +111,26 @@ fn smooth_of(p: &[f64]) -> SmoothShape {
 }
 
 /// Fits the shape to `rate` (nm/s) at pixel (dx, dy) mm over the pixels where `use_px` is true
-/// within `window_mm` of the start centre. `None` when the fit does not converge to a
+/// within `window_mm` of the start centre, each pixel's value the model as `response` sees it
+/// (a point sample, or the mean over the pixel). `None` when the fit does not converge to a
 /// footprint (non-finite, or a contact radius outside the window).
 pub fn fit_shape(
     rate: &Array2<f64>,
     use_px: &Array2<bool>,
-    dx: f64,
-    dy: f64,
+    (dx, dy): (f64, f64),
     start: FitStart,
     window_mm: f64,
     steps: usize,
+    response: PixelResponse,
 ) -> Option<ShapeFit> {
     let pts = fit_points(rate, use_px, dx, dy, start.centre, window_mm, NP)?;
     let a0 = start.a_mm.max(2.0 * dx.max(dy));
     let values = |p: &[f64]| {
         let s = shape_of(p, steps);
         let az = s.azimuths();
-        by_chunks(&pts, |&(x, y, _)| s.rate_with(x - p[0], y - p[1], &az))
+        by_chunks(&pts, |&(x, y, _)| {
+            response.mean_of(x - p[0], y - p[1], |u, v| s.rate_with(u, v, &az))
+        })
     };
     // The analytic Jacobian in the fitted parameters (x0, y0 enter as x - x0, y - y0; gamma
     // is constant where `shape_of` clamps it).
@@ -135,9 +139,11 @@ pub fn fit_shape(
         let az = s.azimuths();
         let g_free = (0.05..50.0).contains(&p[4].exp());
         let rows = by_chunks(&pts, |&(x, y, _)| {
-            let (r, d) = s.rate_partials(x - p[0], y - p[1], &az);
-            let dg = if g_free { d[3] } else { 0.0 };
-            [-d[0], -d[1], r, d[2], dg, d[4], d[5]]
+            response.mean_of_n(x - p[0], y - p[1], |u, v| {
+                let (r, d) = s.rate_partials(u, v, &az);
+                let dg = if g_free { d[3] } else { 0.0 };
+                [-d[0], -d[1], r, d[2], dg, d[4], d[5]]
+            })
         });
         (0..NP)
             .map(|k| rows.iter().map(|row| row[k]).collect())
@@ -195,16 +201,18 @@ pub fn fit_shape(
 pub fn fit_smooth(
     rate: &Array2<f64>,
     use_px: &Array2<bool>,
-    dx: f64,
-    dy: f64,
+    (dx, dy): (f64, f64),
     start: FitStart,
     window_mm: f64,
+    response: PixelResponse,
 ) -> Option<ShapeFit<SmoothShape>> {
     let pts = fit_points(rate, use_px, dx, dy, start.centre, window_mm, NP)?;
     let a0 = start.a_mm.max(2.0 * dx.max(dy));
     let values = |p: &[f64]| {
         let s = smooth_of(p);
-        by_chunks(&pts, |&(x, y, _)| s.rate_at(x - p[0], y - p[1]))
+        by_chunks(&pts, |&(x, y, _)| {
+            response.mean_of(x - p[0], y - p[1], |u, v| s.rate_at(u, v))
+        })
     };
     let h = [1e-5 * a0, 1e-5 * a0, 1e-6, 1e-6, 1e-6];
     let clamp = |q: &mut [f64]| {
@@ -443,12 +451,94 @@ mod tests {
             peak: 9.0,
             a_mm: 3.0,
         };
-        let f = fit_shape(&rate, &use_px, px, px, start, 5.0, 4).unwrap();
+        let f = fit_shape(
+            &rate,
+            &use_px,
+            (px, px),
+            start,
+            5.0,
+            4,
+            PixelResponse::Point,
+        )
+        .unwrap();
         let a = p.contact_radius_mm();
         assert!((f.shape.a_mm / a - 1.0).abs() < 1e-4, "{f:?}");
         assert!((f.shape.gamma - 0.5).abs() < 1e-3, "{f:?}");
         assert!((f.centre.0 - uc).abs() < 1e-4 && (f.centre.1 - vc).abs() < 1e-4);
         assert!(f.residual_rms < 1e-4 * f.data_rms, "{f:?}");
+    }
+
+    /// The mean of `f` over each pixel of `sampled`'s map, by 16 x 16 midpoints (not the fit's
+    /// Gauss-Legendre nodes).
+    fn pixel_means(n: usize, px: f64, c: (f64, f64), f: impl Fn(f64, f64) -> f64) -> Array2<f64> {
+        const M: usize = 16;
+        sampled(n, px, c, |x, y| {
+            let mut s = 0.0;
+            for a in 0..M {
+                for b in 0..M {
+                    let (u, v) = (
+                        (b as f64 + 0.5) / M as f64 - 0.5,
+                        (a as f64 + 0.5) / M as f64 - 0.5,
+                    );
+                    s += f(x + u * px, y + v * px);
+                }
+            }
+            s / (M * M) as f64
+        })
+    }
+
+    #[test]
+    fn recovers_a_bonnet_from_pixel_means_when_told_the_pixels_average() {
+        // A camera's spot: each pixel the mean over its square. Fitted as point samples the
+        // shape comes out wider (the box adds px^2 / 12 to the second moment); fitted as area
+        // means it is the bonnet itself.
+        let mut p = BonnetTifParams::paper(10.0);
+        p.offset_mm = 0.2;
+        let m = BonnetTif::new(&p).unwrap();
+        let (px, n) = (0.25, 49usize);
+        let (uc, vc) = (24.3, 23.6);
+        let rate = pixel_means(n, px, (uc, vc), |x, y| m.rate_at_mm(x, y));
+        let use_px = Array2::from_elem((n, n), true);
+        let start = FitStart {
+            centre: (24.0, 24.0),
+            peak: 9.0,
+            a_mm: 3.0,
+        };
+        let a = p.contact_radius_mm();
+        let area = fit_shape(
+            &rate,
+            &use_px,
+            (px, px),
+            start,
+            5.0,
+            4,
+            PixelResponse::area(px, px),
+        )
+        .unwrap();
+        let point = fit_shape(
+            &rate,
+            &use_px,
+            (px, px),
+            start,
+            5.0,
+            4,
+            PixelResponse::Point,
+        )
+        .unwrap();
+        let err_area = (area.shape.a_mm / a - 1.0).abs();
+        let err_point = (point.shape.a_mm / a - 1.0).abs();
+        assert!(err_area < 2e-4, "area fit a {} vs {a}", area.shape.a_mm);
+        assert!(
+            err_point > 10.0 * err_area,
+            "point {err_point} vs area {err_area}"
+        );
+        assert!((area.centre.0 - uc).abs() < 1e-3 && (area.centre.1 - vc).abs() < 1e-3);
+        assert!(
+            area.residual_rms < 0.2 * point.residual_rms,
+            "area {} point {}",
+            area.residual_rms,
+            point.residual_rms
+        );
     }
 
     #[test]
@@ -468,7 +558,7 @@ mod tests {
             peak: 8.0,
             a_mm: 2.6,
         };
-        let f = fit_smooth(&rate, &use_px, px, px, start, 5.0).unwrap();
+        let f = fit_smooth(&rate, &use_px, (px, px), start, 5.0, PixelResponse::Point).unwrap();
         assert!((f.shape.sigma_mm / 0.6 - 1.0).abs() < 1e-5, "{f:?}");
         assert!((f.shape.beta - 1.0).abs() < 1e-5, "{f:?}");
         assert!((f.shape.peak / 10.0 - 1.0).abs() < 1e-5, "{f:?}");
@@ -480,7 +570,7 @@ mod tests {
         // A flat-topped one (beta 2) from the same start.
         let g2 = SmoothShape { beta: 2.0, ..g };
         let rate2 = sampled(n, px, (uc, vc), |x, y| g2.rate_at(x, y));
-        let f2 = fit_smooth(&rate2, &use_px, px, px, start, 5.0).unwrap();
+        let f2 = fit_smooth(&rate2, &use_px, (px, px), start, 5.0, PixelResponse::Point).unwrap();
         assert!((f2.shape.beta - 2.0).abs() < 1e-4, "{f2:?}");
         assert!((f2.shape.sigma_mm / 0.6 - 1.0).abs() < 1e-4, "{f2:?}");
     }

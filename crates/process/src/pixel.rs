@@ -1,0 +1,267 @@
+//! How a map's pixels sample the surface: at their centres (point samples) or as the mean over
+//! their area, as a camera pixel integrates the fringe over its square.
+//!
+//! The forward model predicts removal at pixel centres. An interferometer's camera pixel
+//! reports the mean over its area instead: the removal convolved with a box of one pixel. Since
+//! the removal is a sum of the TIF at the tool's positions, the pixel means are the same sum of
+//! the TIF's own box means: [`PixelMean`] is that field (the box given in mm, so a removal on
+//! another grid, a coarse screening grid, still sees the map's pixel), and every kernel built
+//! from it (motion kernels, line phases, derivative channels, matched filters) sees the pixel
+//! as the camera does, above the map's Nyquist too. [`PixelResponse::mean_of`] averages a model
+//! over a pixel where a fit compares it with pixel values (the measured spot's shape fit).
+//!
+//! The box mean is a 5 x 5 Gauss-Legendre rule: exact for polynomials of degree 9 in each
+//! axis; across a square-root rim it is the part of the error that remains (test
+//! `area_pixels_match_the_pixel_means_of_exact_deposition`).
+
+use crate::tif::RateField;
+
+/// How a map's pixels sample the surface.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum PixelResponse {
+    /// Each pixel is the value at its centre (the model's own sampling).
+    #[default]
+    Point,
+    /// Each pixel is the mean over a `dx_mm` x `dy_mm` box centred on it.
+    Area { dx_mm: f64, dy_mm: f64 },
+}
+
+/// How an instrument's pixels sample a surface, whatever their size: a recipe's
+/// `[measurement] pixels`, and a measured spot's ([`crate::tif::measured::SpotOptions`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PixelSampling {
+    /// Values at the pixel centres.
+    #[default]
+    Point,
+    /// Means over the pixel's area (a camera pixel).
+    Area,
+}
+
+impl PixelSampling {
+    /// The response of pixels of (`dx_mm`, `dy_mm`) sampled this way.
+    pub fn response(self, dx_mm: f64, dy_mm: f64) -> PixelResponse {
+        match self {
+            PixelSampling::Point => PixelResponse::Point,
+            PixelSampling::Area => PixelResponse::area(dx_mm, dy_mm),
+        }
+    }
+
+    /// The name a recipe uses (`point`, `area`).
+    pub fn name(self) -> &'static str {
+        match self {
+            PixelSampling::Point => "point",
+            PixelSampling::Area => "area",
+        }
+    }
+
+    /// From a recipe's name; `None` for any other.
+    pub fn from_name(name: &str) -> Option<PixelSampling> {
+        match name {
+            "point" => Some(PixelSampling::Point),
+            "area" => Some(PixelSampling::Area),
+            _ => None,
+        }
+    }
+}
+
+/// Gauss-Legendre nodes (on [-1/2, 1/2]) and weights (summing to 1) of [`PixelResponse::mean_of`]:
+/// five per axis, exact for polynomials of degree 9.
+const GL_NODES: [f64; 5] = [
+    -0.453_089_922_969_332_2,
+    -0.269_234_655_052_841_4,
+    0.0,
+    0.269_234_655_052_841_4,
+    0.453_089_922_969_332_2,
+];
+const GL_WEIGHTS: [f64; 5] = [
+    0.118_463_442_528_094_5,
+    0.239_314_335_249_683_2,
+    0.284_444_444_444_444_4,
+    0.239_314_335_249_683_2,
+    0.118_463_442_528_094_5,
+];
+
+impl PixelResponse {
+    /// The area response of a map with pixel (`dx_mm`, `dy_mm`).
+    pub fn area(dx_mm: f64, dy_mm: f64) -> PixelResponse {
+        PixelResponse::Area { dx_mm, dy_mm }
+    }
+
+    /// Whether pixels are point samples (nothing to apply).
+    pub fn is_point(&self) -> bool {
+        matches!(self, PixelResponse::Point)
+    }
+
+    /// The value a pixel centred on (`x`, `y`) mm reports of `f`: `f(x, y)` for point samples,
+    /// its mean over the box (5 x 5 Gauss-Legendre nodes) for area pixels.
+    pub fn mean_of(&self, x: f64, y: f64, f: impl Fn(f64, f64) -> f64) -> f64 {
+        match *self {
+            PixelResponse::Point => f(x, y),
+            PixelResponse::Area { dx_mm, dy_mm } => {
+                let mut s = 0.0;
+                for (a, wa) in GL_NODES.iter().zip(GL_WEIGHTS) {
+                    let mut row = 0.0;
+                    for (b, wb) in GL_NODES.iter().zip(GL_WEIGHTS) {
+                        row += wb * f(x + b * dx_mm, y + a * dy_mm);
+                    }
+                    s += wa * row;
+                }
+                s
+            }
+        }
+    }
+
+    /// [`Self::mean_of`] of a vector-valued `f` (its `N` components averaged alike).
+    pub fn mean_of_n<const N: usize>(
+        &self,
+        x: f64,
+        y: f64,
+        f: impl Fn(f64, f64) -> [f64; N],
+    ) -> [f64; N] {
+        match *self {
+            PixelResponse::Point => f(x, y),
+            PixelResponse::Area { dx_mm, dy_mm } => {
+                let mut s = [0.0; N];
+                for (a, wa) in GL_NODES.iter().zip(GL_WEIGHTS) {
+                    for (b, wb) in GL_NODES.iter().zip(GL_WEIGHTS) {
+                        let v = f(x + b * dx_mm, y + a * dy_mm);
+                        for (sk, vk) in s.iter_mut().zip(v) {
+                            *sk += wa * wb * vk;
+                        }
+                    }
+                }
+                s
+            }
+        }
+    }
+}
+
+/// A rate field as pixels of a [`PixelResponse`] see it: its mean over the pixel's box around
+/// each point (the field itself for point samples). Preserves the volume; reaches half a pixel
+/// further.
+#[derive(Debug, Clone)]
+pub struct PixelMean<F> {
+    inner: F,
+    response: PixelResponse,
+}
+
+impl<F: RateField> PixelMean<F> {
+    /// `inner` seen through `response`.
+    pub fn new(inner: F, response: PixelResponse) -> PixelMean<F> {
+        PixelMean { inner, response }
+    }
+}
+
+impl<F: RateField> RateField for PixelMean<F> {
+    fn rate_at_mm(&self, dx_mm: f64, dy_mm: f64) -> f64 {
+        self.response
+            .mean_of(dx_mm, dy_mm, |x, y| self.inner.rate_at_mm(x, y))
+    }
+
+    fn half_extent_mm(&self) -> (f64, f64) {
+        let (ex, ey) = self.inner.half_extent_mm();
+        match self.response {
+            PixelResponse::Point => (ex, ey),
+            PixelResponse::Area { dx_mm, dy_mm } => (ex + 0.5 * dx_mm, ey + 0.5 * dy_mm),
+        }
+    }
+
+    fn volume_rate_nm_mm2_per_s(&self) -> Option<f64> {
+        self.inner.volume_rate_nm_mm2_per_s()
+    }
+
+    fn rates_along(&self, along_x: bool, c: f64, t: &[f64], out: &mut [f64]) {
+        let PixelResponse::Area { dx_mm, dy_mm } = self.response else {
+            return self.inner.rates_along(along_x, c, t, out);
+        };
+        let (h_along, h_across) = if along_x {
+            (dx_mm, dy_mm)
+        } else {
+            (dy_mm, dx_mm)
+        };
+        out.fill(0.0);
+        let mut ts = vec![0.0; t.len()];
+        let mut v = vec![0.0; t.len()];
+        for (a, wa) in GL_NODES.iter().zip(GL_WEIGHTS) {
+            for (b, wb) in GL_NODES.iter().zip(GL_WEIGHTS) {
+                for (s, &x) in ts.iter_mut().zip(t) {
+                    *s = x + b * h_along;
+                }
+                self.inner
+                    .rates_along(along_x, c + a * h_across, &ts, &mut v);
+                let w = wa * wb;
+                for (o, &x) in out.iter_mut().zip(&v) {
+                    *o += w * x;
+                }
+            }
+        }
+    }
+}
+
+impl<T: RateField + ?Sized> RateField for &T {
+    fn rate_at_mm(&self, dx_mm: f64, dy_mm: f64) -> f64 {
+        (**self).rate_at_mm(dx_mm, dy_mm)
+    }
+
+    fn half_extent_mm(&self) -> (f64, f64) {
+        (**self).half_extent_mm()
+    }
+
+    fn volume_rate_nm_mm2_per_s(&self) -> Option<f64> {
+        (**self).volume_rate_nm_mm2_per_s()
+    }
+
+    fn rates_along(&self, along_x: bool, c: f64, t: &[f64], out: &mut [f64]) {
+        (**self).rates_along(along_x, c, t, out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gauss_legendre_weights_integrate_polynomials_over_the_pixel() {
+        let w: f64 = GL_WEIGHTS.iter().sum();
+        assert!((w - 1.0).abs() < 1e-15);
+        // Mean of x^8 over [-1/2, 1/2] is (1/2)^8 / 9.
+        let m: f64 = GL_NODES
+            .iter()
+            .zip(GL_WEIGHTS)
+            .map(|(x, w)| w * x.powi(8))
+            .sum();
+        assert!((m - 0.5f64.powi(8) / 9.0).abs() < 1e-15, "{m}");
+    }
+
+    #[test]
+    fn the_mean_of_a_gaussian_over_a_pixel_is_the_erf_difference() {
+        // Mean over [x - h/2, x + h/2] of exp(-x^2 / (2 s^2)) is
+        // s sqrt(pi / 2) (erf((x + h/2) / (s sqrt 2)) - erf((x - h/2) / (s sqrt 2))) / h; erf by
+        // its series (independent of the quadrature).
+        fn erf(z: f64) -> f64 {
+            let mut term = z;
+            let mut s = z;
+            for n in 1..80 {
+                term *= -z * z / n as f64;
+                s += term / (2 * n + 1) as f64;
+            }
+            s * 2.0 / std::f64::consts::PI.sqrt()
+        }
+        let (sig, h) = (1.3, 0.25);
+        let r = PixelResponse::area(h, h);
+        for &(x, y) in &[(0.0, 0.0), (0.7, -1.1), (2.9, 3.3)] {
+            let one = |t: f64| {
+                let c = sig * std::f64::consts::SQRT_2;
+                sig * (std::f64::consts::PI / 2.0).sqrt()
+                    * (erf((t + h / 2.0) / c) - erf((t - h / 2.0) / c))
+                    / h
+            };
+            let want = one(x) * one(y);
+            let got = r.mean_of(x, y, |u, v| (-(u * u + v * v) / (2.0 * sig * sig)).exp());
+            assert!((got - want).abs() < 1e-12, "{got} vs {want}");
+            let p = PixelResponse::Point
+                .mean_of(x, y, |u, v| (-(u * u + v * v) / (2.0 * sig * sig)).exp());
+            assert!((p - want).abs() > 1e-3 * want, "the box must matter here");
+        }
+    }
+}
