@@ -738,11 +738,14 @@ fn report(
         reals.len(),
         if args.pixel_average > 1 {
             format!(
-                "the mean of {0} x {0} point samples of the surface over each pixel's square",
+                "the mean of {0} x {0} point samples of the surface over each pixel's square (the removal deposited exactly at them)",
                 args.pixel_average
             )
         } else {
             "point samples of the surface at their centres".to_string()
+        } + match args.pixels {
+            PixelSampling::Area => ", read by calibrate as area means (`[measurement] pixels = \"area\"`)",
+            PixelSampling::Point => ", read by calibrate as point samples",
         },
     ));
     s.push_str(

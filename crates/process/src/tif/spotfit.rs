@@ -437,20 +437,26 @@ mod tests {
         })
     }
 
-    #[test]
-    fn recovers_a_hertz_bonnet_from_coarse_pixels() {
+    /// The paper's bonnet at a 0.2 mm offset, and a fit's start near `centre` (row, column).
+    fn offset_bonnet(centre: f64) -> (BonnetTifParams, BonnetTif, FitStart) {
         let mut p = BonnetTifParams::paper(10.0);
         p.offset_mm = 0.2;
         let m = BonnetTif::new(&p).unwrap();
+        let start = FitStart {
+            centre: (centre, centre),
+            peak: 9.0,
+            a_mm: 3.0,
+        };
+        (p, m, start)
+    }
+
+    #[test]
+    fn recovers_a_hertz_bonnet_from_coarse_pixels() {
+        let (p, m, start) = offset_bonnet(12.0);
         let (px, n) = (0.5, 25usize);
         let (uc, vc) = (12.3, 11.6);
         let rate = sampled(n, px, (uc, vc), |x, y| m.rate_at_mm(x, y));
         let use_px = Array2::from_elem((n, n), true);
-        let start = FitStart {
-            centre: (12.0, 12.0),
-            peak: 9.0,
-            a_mm: 3.0,
-        };
         let f = fit_shape(
             &rate,
             &use_px,
@@ -492,18 +498,11 @@ mod tests {
         // A camera's spot: each pixel the mean over its square. Fitted as point samples the
         // shape comes out wider (the box adds px^2 / 12 to the second moment); fitted as area
         // means it is the bonnet itself.
-        let mut p = BonnetTifParams::paper(10.0);
-        p.offset_mm = 0.2;
-        let m = BonnetTif::new(&p).unwrap();
+        let (p, m, start) = offset_bonnet(24.0);
         let (px, n) = (0.25, 49usize);
         let (uc, vc) = (24.3, 23.6);
         let rate = pixel_means(n, px, (uc, vc), |x, y| m.rate_at_mm(x, y));
         let use_px = Array2::from_elem((n, n), true);
-        let start = FitStart {
-            centre: (24.0, 24.0),
-            peak: 9.0,
-            a_mm: 3.0,
-        };
         let a = p.contact_radius_mm();
         let area = fit_shape(
             &rate,
