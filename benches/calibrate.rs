@@ -10,9 +10,13 @@
 //! `BONNETLAB_CALIBRATE_ONCE=800 target/release/deps/calibrate-<hash>` generates the 800 x 800
 //! run, calibrates it once, prints the CPU time (all threads, s) and wall time of the timed part
 //! and writes the calibration's JSON to the file named by `BONNETLAB_CALIBRATE_JSON` if set.
+//! `BONNETLAB_CALIBRATE_PIXELS=area` reads the maps' and the spot's pixels as area means (the
+//! recipe's `[measurement] pixels`); the criterion group times that too at 800 x 800, on the
+//! same (point-sampled) run: a timing of the area reading, not a test of it.
 
 use bonnetlab::calibrate::run::{calibrate, Options};
 use bonnetlab::calibrate::synth::{generate, SynthConfig, SynthRun};
+use bonnetlab::process::pixel::PixelSampling;
 use criterion::{criterion_group, Criterion};
 
 fn make(n: usize) -> SynthRun {
@@ -32,6 +36,14 @@ fn bench(c: &mut Criterion) {
                 cal
             })
         });
+        if n == 800 {
+            g.bench_function(format!("{n}x{n}_full_library_area_pixels"), |b| {
+                b.iter(|| {
+                    let p = run.problem_seen(PixelSampling::Area).expect("problem");
+                    calibrate(&p, &Options::default()).expect("calibration")
+                })
+            });
+        }
     }
     g.finish();
 }
@@ -43,12 +55,17 @@ fn cpu_s() -> f64 {
 
 fn once(n: usize) {
     let run = make(n);
+    let pixels = std::env::var("BONNETLAB_CALIBRATE_PIXELS")
+        .ok()
+        .and_then(|v| PixelSampling::from_name(&v))
+        .unwrap_or_default();
     let (c0, t0) = (cpu_s(), std::time::Instant::now());
-    let p = run.problem().expect("problem");
+    let p = run.problem_seen(pixels).expect("problem");
     let cal = calibrate(&p, &Options::default()).expect("calibration");
     let (cpu, wall) = (cpu_s() - c0, t0.elapsed().as_secs_f64());
     println!(
-        "{n}x{n}: cpu {cpu:.2} s, wall {wall:.2} s, effects {:?}",
+        "{n}x{n} ({} pixels): cpu {cpu:.2} s, wall {wall:.2} s, effects {:?}",
+        pixels.name(),
         cal.effects
             .iter()
             .map(|e| e.kind.as_str())

@@ -180,6 +180,27 @@ impl<F: RateField> RateField for PixelMean<F> {
             (dy_mm, dx_mm)
         };
         out.fill(0.0);
+        // The kernel builds ask for a pixel's midpoints, evenly spaced: the box along the line
+        // is then the mean of m midpoints of the same spacing shifted by half of it, shared
+        // between neighbouring points (one field value per point and node across, not five).
+        if let Some((m, step)) = even_division(t, h_along) {
+            let u: Vec<f64> = (0..t.len() + m - 1)
+                .map(|i| t[0] - 0.5 * h_along + (i as f64 + 0.5) * step)
+                .collect();
+            let mut v = vec![0.0; u.len()];
+            for (a, wa) in GL_NODES.iter().zip(GL_WEIGHTS) {
+                self.inner
+                    .rates_along(along_x, c + a * h_across, &u, &mut v);
+                let mut sum: f64 = v[..m].iter().sum();
+                for (k, o) in out.iter_mut().enumerate() {
+                    if k > 0 {
+                        sum += v[k + m - 1] - v[k - 1];
+                    }
+                    *o += wa * sum / m as f64;
+                }
+            }
+            return;
+        }
         let mut ts = vec![0.0; t.len()];
         let mut v = vec![0.0; t.len()];
         for (a, wa) in GL_NODES.iter().zip(GL_WEIGHTS) {
@@ -196,6 +217,26 @@ impl<F: RateField> RateField for PixelMean<F> {
             }
         }
     }
+}
+
+/// When `t` is evenly spaced (within 1e-9 of `h`) at `h / m` for an integer m of at least 8:
+/// (m, the spacing).
+fn even_division(t: &[f64], h: f64) -> Option<(usize, f64)> {
+    if t.len() < 2 {
+        return None;
+    }
+    let step = t[1] - t[0];
+    if step.is_nan() || step <= 0.0 {
+        return None;
+    }
+    let m = h / step;
+    let mr = m.round();
+    if mr < 8.0 || (m - mr).abs() > 1e-6 * mr {
+        return None;
+    }
+    t.windows(2)
+        .all(|w| ((w[1] - w[0]) - step).abs() <= 1e-9 * h)
+        .then_some((mr as usize, step))
 }
 
 impl<T: RateField + ?Sized> RateField for &T {
@@ -231,6 +272,36 @@ mod tests {
             .map(|(x, w)| w * x.powi(8))
             .sum();
         assert!((m - 0.5f64.powi(8) / 9.0).abs() < 1e-15, "{m}");
+    }
+
+    #[test]
+    fn a_line_of_midpoints_takes_the_shared_box_and_agrees_with_the_nodes() {
+        // A kernel build's line: 32 midpoints per 0.25 mm pixel over 12 pixels, across the
+        // paper's bonnet (its square-root rim included). The shared midpoint box along the line
+        // and the 5 x 5 nodes of `rate_at_mm` agree to 5e-6 of the peak (measured: 2-5e-7); an
+        // uneven line takes the nodes.
+        let b =
+            crate::tif::bonnet::BonnetTif::new(&crate::tif::BonnetTifParams::paper(10.0)).unwrap();
+        let f = PixelMean::new(&b, PixelResponse::area(0.25, 0.25));
+        let t: Vec<f64> = (0..12 * 32)
+            .map(|k| -3.0 + (k as f64 + 0.5) * 0.25 / 32.0)
+            .collect();
+        assert_eq!(even_division(&t, 0.25).map(|(m, _)| m), Some(32));
+        let mut out = vec![0.0; t.len()];
+        for c in [0.0, 1.3, 2.7] {
+            f.rates_along(true, c, &t, &mut out);
+            let peak = f.rate_at_mm(0.0, 0.0);
+            let worst = t
+                .iter()
+                .zip(&out)
+                .map(|(&x, &o)| (o - f.rate_at_mm(x, c)).abs())
+                .fold(0.0f64, f64::max);
+            assert!(worst < 5e-6 * peak, "line at {c}: {worst} of {peak}");
+            assert!(out.iter().any(|&o| o > 0.01 * peak));
+        }
+        let mut uneven = t.clone();
+        uneven[5] += 1e-3;
+        assert!(even_division(&uneven, 0.25).is_none());
     }
 
     #[test]
