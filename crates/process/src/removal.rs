@@ -516,7 +516,8 @@ pub struct FastRemoval {
     prebuilt: Vec<KeyedHat>,
     /// How finely the next removals resolve a motion whose lines spread.
     fidelity: Fidelity,
-    /// How the map's pixels see the removal (applied to every kernel spectrum).
+    /// How the map's pixels see the removal (the field is already [`PixelMean`] when they
+    /// are area means; kept for the dwell spectra, which take other fields).
     response: PixelResponse,
 }
 
@@ -1704,13 +1705,12 @@ mod tests {
 
     #[test]
     fn area_pixels_match_the_pixel_means_of_exact_deposition() {
-        // The paper's bonnet (square-root rim, 2.8 mm contact radius) on 0.5 mm pixels, a
-        // raster at a 1.7 mm pitch: exact deposition on a grid eight times finer, averaged over
-        // each map pixel's 8 x 8 sub-pixels, is what a camera pixel reports. The fast removal
+        // The paper's bonnet (square-root rim, 2.8 mm contact radius) on 0.25 mm pixels, a
+        // raster at a 1.7 mm pitch: exact deposition on a grid six times finer, averaged over
+        // each map pixel's 6 x 6 sub-pixels, is what a camera pixel reports. The fast removal
         // with the area response must match it far better than the point-sampled one does.
         let p = crate::tif::BonnetTifParams::paper(10.0);
         let b = crate::tif::bonnet::BonnetTif::new(&p).unwrap();
-
         let (dx, k) = (0.25, 6usize);
         let (rows, cols) = (48, 56);
         let grid = Grid::new(rows, cols, dx, dx, 0.0, 0.0).unwrap();

@@ -450,23 +450,19 @@ mod tests {
         (p, m, start)
     }
 
+    /// The bonnet's shape fitted over every pixel of `rate` (pixel `px`, 5 mm window).
+    fn fit_all(rate: &Array2<f64>, px: f64, start: FitStart, response: PixelResponse) -> ShapeFit {
+        let use_px = Array2::from_elem(rate.dim(), true);
+        fit_shape(rate, &use_px, (px, px), start, 5.0, 4, response).unwrap()
+    }
+
     #[test]
     fn recovers_a_hertz_bonnet_from_coarse_pixels() {
         let (p, m, start) = offset_bonnet(12.0);
         let (px, n) = (0.5, 25usize);
         let (uc, vc) = (12.3, 11.6);
         let rate = sampled(n, px, (uc, vc), |x, y| m.rate_at_mm(x, y));
-        let use_px = Array2::from_elem((n, n), true);
-        let f = fit_shape(
-            &rate,
-            &use_px,
-            (px, px),
-            start,
-            5.0,
-            4,
-            PixelResponse::Point,
-        )
-        .unwrap();
+        let f = fit_all(&rate, px, start, PixelResponse::Point);
         let a = p.contact_radius_mm();
         assert!((f.shape.a_mm / a - 1.0).abs() < 1e-4, "{f:?}");
         assert!((f.shape.gamma - 0.5).abs() < 1e-3, "{f:?}");
@@ -502,28 +498,9 @@ mod tests {
         let (px, n) = (0.25, 49usize);
         let (uc, vc) = (24.3, 23.6);
         let rate = pixel_means(n, px, (uc, vc), |x, y| m.rate_at_mm(x, y));
-        let use_px = Array2::from_elem((n, n), true);
         let a = p.contact_radius_mm();
-        let area = fit_shape(
-            &rate,
-            &use_px,
-            (px, px),
-            start,
-            5.0,
-            4,
-            PixelResponse::area(px, px),
-        )
-        .unwrap();
-        let point = fit_shape(
-            &rate,
-            &use_px,
-            (px, px),
-            start,
-            5.0,
-            4,
-            PixelResponse::Point,
-        )
-        .unwrap();
+        let area = fit_all(&rate, px, start, PixelResponse::area(px, px));
+        let point = fit_all(&rate, px, start, PixelResponse::Point);
         let err_area = (area.shape.a_mm / a - 1.0).abs();
         let err_point = (point.shape.a_mm / a - 1.0).abs();
         assert!(err_area < 2e-4, "area fit a {} vs {a}", area.shape.a_mm);
