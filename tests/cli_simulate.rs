@@ -65,6 +65,34 @@ fn simulate_writes_maps_json_and_plots() {
     let removal = bonnetlab::io::read_surface(&out.join("predicted_removal.dat")).unwrap();
     let mean = removal.valid_heights().sum::<f64>() / removal.valid_count() as f64;
     assert!((mean / expect - 1.0).abs() < 0.01, "{mean} vs {expect}");
+    // A recipe whose pixels are area means: simulate says it predicts at the pixel centres.
+    let says_pixels = |v: &serde_json::Value| {
+        v["notes"]
+            .as_array()
+            .expect("notes")
+            .iter()
+            .any(|n| n.as_str().unwrap_or("").contains("pixels = \"area\""))
+    };
+    assert!(!says_pixels(&v), "{}", v["notes"]);
+    let recipe = std::fs::read_to_string(d.join("recipe.toml")).unwrap();
+    std::fs::write(
+        d.join("area.toml"),
+        recipe.replacen("[measurement]\n", "[measurement]\npixels = \"area\"\n", 1),
+    )
+    .unwrap();
+    let out_area = d.join("out_area");
+    let o = Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
+        .arg("simulate")
+        .arg(d.join("area.toml"))
+        .arg("--no-vibration")
+        .arg("--out")
+        .arg(&out_area)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let va: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_area.join("simulation.json")).unwrap()).unwrap();
+    assert!(says_pixels(&va), "{}", va["notes"]);
     // Bad recipe: one line naming the file and key, exit 2.
     std::fs::write(d.join("bad.toml"), "[measurement]\nbefore = \"before.dat\"\n[tif]\nspot = \"s.dat\"\n[path]\nlog = \"p.csv\"\n").unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_bonnetlab"))

@@ -206,6 +206,13 @@ pub fn simulate(
     let with_vibration = !opts.no_vibration
         && (opts.bonnet.is_some() || recipe.vibration.is_some() || has_process_table(recipe_file));
     let mut notes = Vec::new();
+    if recipe.pixels == bonnetlab_process::pixel::PixelSampling::Area {
+        notes.push(
+            "[measurement] pixels = \"area\" is read by calibrate only: this prediction is at \
+             the pixel centres"
+                .to_string(),
+        );
+    }
     let (prediction, vib, sweep) = if with_vibration || opts.sweep_rpm {
         let p = &recipe.process;
         let params = VibrationParams::from_parts(
