@@ -95,20 +95,7 @@ impl PixelResponse {
     /// The value a pixel centred on (`x`, `y`) mm reports of `f`: `f(x, y)` for point samples,
     /// its mean over the box (5 x 5 Gauss-Legendre nodes) for area pixels.
     pub fn mean_of(&self, x: f64, y: f64, f: impl Fn(f64, f64) -> f64) -> f64 {
-        match *self {
-            PixelResponse::Point => f(x, y),
-            PixelResponse::Area { dx_mm, dy_mm } => {
-                let mut s = 0.0;
-                for (a, wa) in GL_NODES.iter().zip(GL_WEIGHTS) {
-                    let mut row = 0.0;
-                    for (b, wb) in GL_NODES.iter().zip(GL_WEIGHTS) {
-                        row += wb * f(x + b * dx_mm, y + a * dy_mm);
-                    }
-                    s += wa * row;
-                }
-                s
-            }
-        }
+        self.mean_of_n(x, y, |u, v| [f(u, v)])[0]
     }
 
     /// [`Self::mean_of`] of a vector-valued `f` (its `N` components averaged alike).

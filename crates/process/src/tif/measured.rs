@@ -61,7 +61,10 @@ pub struct SpotOptions {
     pub rim: Rim,
     /// How the spot map's pixels sample the removal: with [`PixelSampling::Area`] the fitted
     /// shape is compared with the spot as means over its pixels, so the field is the TIF
-    /// itself, not the TIF blurred by one spot pixel.
+    /// itself, not the TIF blurred by one spot pixel. What is interpolated from the pixels (a
+    /// significant measured-minus-model residual, or the pixels themselves when no shape
+    /// describes the spot) stays as measured: pixel means, which a removal for area pixels
+    /// then averages once more (a second blur of that part only).
     pub pixels: PixelSampling,
 }
 
