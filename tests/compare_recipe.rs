@@ -89,6 +89,7 @@ fn run(name: &str, truth: &VibrationParams, true_tif: &GaussianTif, noise_seed: 
         after: Surface::new(a, Some(D), Some(D)).unwrap(),
         tif: TifSource::Gaussian(tif(1.0)),
         spot: None,
+        pixels: bonnetlab::process::pixel::PixelSampling::Point,
         path: p,
         pitch_mm: PITCH,
         bonnet: Bonnet::Original,

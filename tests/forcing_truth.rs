@@ -16,7 +16,7 @@ use bonnetlab_calibrate::synth::Injected;
 use bonnetlab_calibrate::synth::SynthRun;
 use bonnetlab_process::path::kinematics::{apply_limits, Limits};
 use bonnetlab_process::recipe::TifSource;
-use bonnetlab_process::simulate::ToolModel;
+use bonnetlab_process::simulate::{ToolModel, ToolShape};
 use bonnetlab_process::tif::measured::{MeasuredTif, Rim, SpotModel, SpotOptions};
 use bonnetlab_process::tif::{RateField, Tif};
 use bonnetlab_process::Grid;
@@ -80,7 +80,10 @@ fn tool_model(run: &SynthRun, tool: Tool, dx: f64, dy: f64) -> ToolModel {
         }
         Tool::Spot(rim) => {
             let m = spot_field(run, rim);
-            ToolModel::Measured(Tif::sample(&m, dx, dy).unwrap(), Box::new(m))
+            ToolModel::from(ToolShape::Measured(
+                Tif::sample(&m, dx, dy).unwrap(),
+                Box::new(m),
+            ))
         }
     }
 }

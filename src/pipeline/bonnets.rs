@@ -29,8 +29,9 @@
 use std::path::{Path, PathBuf};
 
 use bonnetlab_calibrate::run::{calibrate, Calibration, EffectReport};
+use bonnetlab_process::pixel::PixelSampling;
 use bonnetlab_process::recipe::{Recipe, TifSource};
-use bonnetlab_process::simulate::ToolModel;
+use bonnetlab_process::simulate::{ToolModel, ToolShape};
 use bonnetlab_process::tif::RateField;
 use bonnetlab_process::{Grid, PathLog};
 use bonnetlab_spectrum::{ripple, PsdOptions};
@@ -97,6 +98,8 @@ pub struct RunInput {
     pub tif: TifSource,
     /// The measured spot map when `tif` is a measured spot.
     pub spot: Option<Surface>,
+    /// How the maps' and the spot's pixels sample the surface (`[measurement] pixels`).
+    pub pixels: PixelSampling,
     pub path: PathLog,
     /// Raster pitch, mm.
     pub pitch_mm: f64,
@@ -151,6 +154,7 @@ impl RunInput {
             after,
             tif: recipe.tif.clone(),
             spot,
+            pixels: recipe.pixels,
             path,
             pitch_mm,
             bonnet: if p.bonnet == "suppression" {
@@ -261,16 +265,22 @@ fn scaled_tool_model(
                 g.diameter_mm * scale,
                 g.peak_rate_nm_per_s,
             )?;
-            ToolModel::from_source(&TifSource::Gaussian(w), None, dx, dy)
+            Ok(
+                ToolModel::from_source(&TifSource::Gaussian(w), None, dx, dy)?
+                    .seen_by(tool.response()),
+            )
         }
         _ => {
             let f = Scaled {
                 base: tool.field(),
                 scale,
             };
-            Ok(ToolModel::Sampled(bonnetlab_process::tif::Tif::sample(
-                &f, dx, dy,
-            )?))
+            Ok(
+                ToolModel::from(ToolShape::Sampled(bonnetlab_process::tif::Tif::sample(
+                    &f, dx, dy,
+                )?))
+                .seen_by(tool.response()),
+            )
         }
     }
 }
@@ -417,7 +427,8 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
 
     // Prediction with the recipe's TIF and forcing.
     let grid = Grid::of(&run.before).map_err(|e| ierr(&e))?;
-    let tool = ToolModel::from_source(&run.tif, run.spot.as_ref(), dx, dy).map_err(|e| ierr(&e))?;
+    let tool = ToolModel::from_source_seen(&run.tif, run.spot.as_ref(), dx, dy, run.pixels)
+        .map_err(|e| ierr(&e))?;
     let input = CouplingInput {
         grid,
         valid: Some(before0.valid()),
@@ -451,12 +462,13 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
             .after
             .with_heights(run.after.heights_nm() + &induced_removal(&model, &fit))
             .map_err(|e| perr(&e))?;
-        let problem = bonnetlab_calibrate::pipeline::problem_from_parts(
+        let problem = bonnetlab_calibrate::pipeline::problem_from_parts_seen(
             &run.before,
             &corrected,
             &run.tif,
             run.spot.as_ref(),
             &run.path,
+            run.pixels,
         )
         .map_err(|e| ierr(&e))?;
         let cal = calibrate(&problem, &opts.calibrate).map_err(|e| perr(&e))?;
@@ -470,12 +482,13 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
                 ];
                 if raw_problem.is_none() {
                     raw_problem = Some(
-                        bonnetlab_calibrate::pipeline::problem_from_parts(
+                        bonnetlab_calibrate::pipeline::problem_from_parts_seen(
                             &run.before,
                             &run.after,
                             &run.tif,
                             run.spot.as_ref(),
                             &run.path,
+                            run.pixels,
                         )
                         .map_err(|e| ierr(&e))?,
                     );

@@ -111,6 +111,9 @@ pub struct SimulationReport {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub spindle_sweep: Option<Vec<SweepRow>>,
     pub notes: Vec<String>,
+    /// How the predicted maps' pixels sample the removal (the recipe's `[measurement] pixels`:
+    /// `point`, values at the pixel centres; `area`, means over each pixel).
+    pub pixels: String,
 }
 
 /// The vibration coupling's prediction for the simulated bonnet.
@@ -180,8 +183,15 @@ pub fn simulate(
         TifSource::Spot { path, .. } => path.clone(),
         _ => recipe_file.to_path_buf(),
     };
-    let tool = ToolModel::from_source(&recipe.tif, spot.as_ref(), grid.dx_mm, grid.dy_mm)
-        .map_err(|e| perr(&spot_file, e))?;
+    // The recipe's pixels: the spot is read, and the maps predicted, as they sample.
+    let tool = ToolModel::from_source_seen(
+        &recipe.tif,
+        spot.as_ref(),
+        grid.dx_mm,
+        grid.dy_mm,
+        recipe.pixels,
+    )
+    .map_err(|e| perr(&spot_file, e))?;
     step("path");
     let path = read_path_csv(&recipe.path_log).map_err(|e| perr(&recipe.path_log, e))?;
     check_pitch(recipe_file, &recipe, grid.dy_mm)?;
@@ -206,13 +216,6 @@ pub fn simulate(
     let with_vibration = !opts.no_vibration
         && (opts.bonnet.is_some() || recipe.vibration.is_some() || has_process_table(recipe_file));
     let mut notes = Vec::new();
-    if recipe.pixels == bonnetlab_process::pixel::PixelSampling::Area {
-        notes.push(
-            "[measurement] pixels = \"area\" is read by calibrate only: this prediction is at \
-             the pixel centres"
-                .to_string(),
-        );
-    }
     let (prediction, vib, sweep) = if with_vibration || opts.sweep_rpm {
         let p = &recipe.process;
         let params = VibrationParams::from_parts(
@@ -359,6 +362,7 @@ pub fn simulate(
         vibration,
         spindle_sweep: sweep,
         notes,
+        pixels: recipe.pixels.name().to_string(),
     };
     step("done");
     Ok(Simulation {

@@ -491,7 +491,7 @@ impl Problem {
 
     /// How the maps' pixels see the removal (the TIF's pixel sampling at the map pixel).
     pub fn response(&self) -> PixelResponse {
-        self.tif.pixels().response(self.grid.dx_mm, self.grid.dy_mm)
+        self.tif.response()
     }
 
     /// Channel sets kept (see [`KERNEL_CACHE_BYTES`]).

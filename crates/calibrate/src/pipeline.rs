@@ -64,7 +64,7 @@ pub fn problem_from_parts_seen(
 ) -> Result<Problem, CalibrateError> {
     let (dx, dy) = before.pixel_mm("calibration")?;
     let tool = ToolModel::from_source_seen(tif, spot, dx, dy, pixels)?;
-    Problem::new(before, after, &TifMap::seen(tool, pixels), path)
+    Problem::new(before, after, &TifMap::new(tool), path)
 }
 
 /// A measured-spot run's problem (the common case of the synthetic runs).
@@ -127,7 +127,7 @@ pub fn load_recipe(recipe_path: &Path) -> Result<Problem, PipelineError> {
         tool.field().half_extent_mm(),
     )
     .map_err(|e| PipelineError::input(&recipe.path_log, e))?;
-    Problem::new(&before, &after, &TifMap::seen(tool, recipe.pixels), &path).map_err(|e| match e {
+    Problem::new(&before, &after, &TifMap::new(tool), &path).map_err(|e| match e {
         CalibrateError::Processing(m) => PipelineError {
             file: recipe_path.to_path_buf(),
             message: m,

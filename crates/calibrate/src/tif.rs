@@ -5,16 +5,15 @@
 
 use std::sync::Arc;
 
-use bonnetlab_process::pixel::PixelSampling;
+use bonnetlab_process::pixel::{PixelResponse, PixelSampling};
 use bonnetlab_process::simulate::ToolModel;
 use bonnetlab_process::tif::RateField;
 
-/// A TIF for the calibration's kernels: a shared handle on the run's [`ToolModel`].
+/// A TIF for the calibration's kernels: a shared handle on the run's [`ToolModel`], which
+/// also says how the maps' pixels sample the removal (the forward model's kernels see it).
 #[derive(Clone)]
 pub struct TifMap {
     tool: Arc<ToolModel>,
-    /// How the maps' pixels sample the removal (the forward model's kernels see it).
-    pixels: PixelSampling,
 }
 
 impl std::fmt::Debug for TifMap {
@@ -25,22 +24,26 @@ impl std::fmt::Debug for TifMap {
 }
 
 impl TifMap {
-    /// The calibration's view of a run's tool model.
+    /// The calibration's view of a run's tool model (seen by the maps' pixels as the tool
+    /// says, [`ToolModel::response`]).
     pub fn new(tool: ToolModel) -> TifMap {
-        TifMap::seen(tool, PixelSampling::Point)
-    }
-
-    /// The view of maps whose pixels sample the removal as `pixels` says.
-    pub fn seen(tool: ToolModel, pixels: PixelSampling) -> TifMap {
         TifMap {
             tool: Arc::new(tool),
-            pixels,
         }
     }
 
     /// How the maps' pixels sample the removal.
     pub fn pixels(&self) -> PixelSampling {
-        self.pixels
+        if self.tool.response().is_point() {
+            PixelSampling::Point
+        } else {
+            PixelSampling::Area
+        }
+    }
+
+    /// The maps' pixels' response (their box in mm when they are area means).
+    pub fn response(&self) -> PixelResponse {
+        self.tool.response()
     }
 
     /// The tool model.

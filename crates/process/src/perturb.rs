@@ -34,6 +34,7 @@ use rayon::prelude::*;
 use crate::fft::{fast_len, MultiConvolver};
 use crate::grid::Grid;
 use crate::modulated::Modulation;
+use crate::pixel::PixelResponse;
 use crate::removal::keys_weights;
 use crate::tif::RateField;
 
@@ -153,7 +154,25 @@ pub struct DerivativeKernels {
 }
 
 impl DerivativeKernels {
+    /// The kernels of maps whose pixels are point samples.
     pub fn sample(t: &OffsetTif<'_>, dx_mm: f64, dy_mm: f64, lateral: Axis) -> DerivativeKernels {
+        Self::sample_seen(t, dx_mm, dy_mm, lateral, PixelResponse::Point)
+    }
+
+    /// The kernels as pixels of `response` see the removal: with area pixels every kernel
+    /// value is the box mean ([`PixelResponse::mean_of`]) of the instantaneous rate's
+    /// derivative, taken outermost (after the footprint's widening with the offset), so the
+    /// box does not widen with it.
+    pub fn sample_seen(
+        t: &OffsetTif<'_>,
+        dx_mm: f64,
+        dy_mm: f64,
+        lateral: Axis,
+        response: PixelResponse,
+    ) -> DerivativeKernels {
+        if !response.is_point() {
+            return Self::sample_area(t, dx_mm, dy_mm, lateral, response);
+        }
         let eh = OFFSET_STEP * t.h0_mm;
         let (ex, ey) = t.half_extent_mm(2.0 * eh);
         let hx = (ex / dx_mm).ceil() as usize + 2;
@@ -231,6 +250,67 @@ impl DerivativeKernels {
             klh: point(4),
             khhh: point(5),
             khhhh: point(6),
+            half: (hy, hx),
+        }
+    }
+
+    /// [`Self::sample_seen`] for area pixels: the derivatives of the box mean, by the same
+    /// differences (one pixel along the lateral axis, `OFFSET_STEP` of h0 in the offset).
+    fn sample_area(
+        t: &OffsetTif<'_>,
+        dx_mm: f64,
+        dy_mm: f64,
+        lateral: Axis,
+        response: PixelResponse,
+    ) -> DerivativeKernels {
+        let eh = OFFSET_STEP * t.h0_mm;
+        let (ex, ey) = t.half_extent_mm(2.0 * eh);
+        let (bx, by) = match response {
+            PixelResponse::Area { dx_mm, dy_mm } => (0.5 * dx_mm, 0.5 * dy_mm),
+            PixelResponse::Point => (0.0, 0.0),
+        };
+        let hx = ((ex + bx) / dx_mm).ceil() as usize + 2;
+        let hy = ((ey + by) / dy_mm).ceil() as usize + 2;
+        let shape = (2 * hy + 1, 2 * hx + 1);
+        let (lx, ly) = lateral.unit();
+        let el = match lateral {
+            Axis::X => dx_mm,
+            Axis::Y => dy_mm,
+        };
+        let rows: Vec<Vec<[f64; 7]>> = (0..shape.0)
+            .into_par_iter()
+            .map(|i| {
+                let y = (i as f64 - hy as f64) * dy_mm;
+                let mut out = vec![[0.0; 7]; shape.1];
+                for (j, o) in out.iter_mut().enumerate() {
+                    let x = (j as f64 - hx as f64) * dx_mm;
+                    let seen = |s: f64, d: f64| {
+                        response.mean_of(x + s * lx * el, y + s * ly * el, |a, b| t.rate(a, b, d))
+                    };
+                    let (c, p, m) = (seen(0.0, 0.0), seen(1.0, 0.0), seen(-1.0, 0.0));
+                    o[0] = (p - m) / (2.0 * el);
+                    o[1] = (p - 2.0 * c + m) / (el * el);
+                    let (hp, hm) = (seen(0.0, eh), seen(0.0, -eh));
+                    o[2] = (hp - hm) / (2.0 * eh);
+                    o[3] = (hp - 2.0 * c + hm) / (eh * eh);
+                    let dh = |s: f64| (seen(s, eh) - seen(s, -eh)) / (2.0 * eh);
+                    o[4] = (dh(1.0) - dh(-1.0)) / (2.0 * el);
+                    let (hp2, hm2) = (seen(0.0, 2.0 * eh), seen(0.0, -2.0 * eh));
+                    o[5] = (hp2 - 2.0 * hp + 2.0 * hm - hm2) / (2.0 * eh * eh * eh);
+                    o[6] = (hp2 - 4.0 * hp + 6.0 * c - 4.0 * hm + hm2) / (eh * eh * eh * eh);
+                }
+                out
+            })
+            .collect();
+        let pick = |c: usize| Array2::from_shape_fn(shape, |(i, j)| rows[i][j][c]);
+        DerivativeKernels {
+            kl: pick(0),
+            kll: pick(1),
+            kh: pick(2),
+            khh: pick(3),
+            klh: pick(4),
+            khhh: pick(5),
+            khhhh: pick(6),
             half: (hy, hx),
         }
     }

@@ -12,7 +12,7 @@ use ndarray::Array2;
 use crate::error::ProcessError;
 use crate::grid::Grid;
 use crate::path::PathLog;
-use crate::pixel::PixelSampling;
+use crate::pixel::{PixelMean, PixelResponse, PixelSampling};
 use crate::recipe::TifSource;
 use crate::removal::{deposit_exact, ExactOptions, FastRemoval};
 use crate::tif::bonnet::BonnetTif;
@@ -28,13 +28,32 @@ pub enum Mode {
     Exact,
 }
 
-/// A TIF ready for simulation: sampled at the map pitch, and the field exact deposition uses.
-pub enum ToolModel {
+/// A TIF's shape: sampled at the map pitch, and the field exact deposition uses.
+pub enum ToolShape {
     Sampled(Tif),
     /// A measured spot: the field at the spot's own pixel, and its samples at the map pitch.
     Measured(Tif, Box<MeasuredTif>),
     Gaussian(Tif, crate::tif::GaussianTif),
     Bonnet(Tif, Box<BonnetTif>),
+}
+
+/// A TIF ready for simulation: its shape, and how the maps' pixels see the removal it makes
+/// (point samples, or means over the pixel's area as a camera's are). Every removal built from
+/// it (the fast model, exact deposition through [`ToolModel::seen_field`], the vibration
+/// coupling's kernels) is what such pixels read; [`ToolModel::field`] is the TIF itself.
+pub struct ToolModel {
+    shape: ToolShape,
+    seen: PixelResponse,
+}
+
+impl From<ToolShape> for ToolModel {
+    /// A tool seen by point samples.
+    fn from(shape: ToolShape) -> ToolModel {
+        ToolModel {
+            shape,
+            seen: PixelResponse::Point,
+        }
+    }
 }
 
 /// Most pixels a TIF footprint may cover at the map pitch (1001 x 1001, 8 MB per copy: a 50 mm
@@ -88,8 +107,10 @@ impl ToolModel {
         ToolModel::from_source_seen(src, spot, dx_mm, dy_mm, PixelSampling::Point)
     }
 
-    /// [`Self::from_source`] for a spot map whose pixels sample the removal as `pixels` says
-    /// (see [`SpotOptions::pixels`]).
+    /// [`Self::from_source`] for maps of pixel (dx, dy) and a spot map whose pixels sample the
+    /// removal as `pixels` says (one instrument): the spot is read that way
+    /// ([`SpotOptions::pixels`]) and the tool's removal is predicted that way
+    /// ([`Self::response`]).
     pub fn from_source_seen(
         src: &TifSource,
         spot: Option<&Surface>,
@@ -97,7 +118,7 @@ impl ToolModel {
         dy_mm: f64,
         pixels: PixelSampling,
     ) -> Result<ToolModel, ProcessError> {
-        Ok(match src {
+        let shape = match src {
             TifSource::Spot { dwell_s, .. } => {
                 let s =
                     spot.ok_or_else(|| ProcessError::invalid("a measured TIF needs its spot map"))?;
@@ -107,11 +128,11 @@ impl ToolModel {
                 };
                 let m = MeasuredTif::from_spot(s, *dwell_s, &o)?;
                 check_footprint(&m, dx_mm, dy_mm)?;
-                ToolModel::Measured(Tif::sample(&m, dx_mm, dy_mm)?, Box::new(m))
+                ToolShape::Measured(Tif::sample(&m, dx_mm, dy_mm)?, Box::new(m))
             }
             TifSource::Gaussian(g) => {
                 check_footprint(g, dx_mm, dy_mm)?;
-                ToolModel::Gaussian(Tif::sample_antialiased(g, dx_mm, dy_mm)?, *g)
+                ToolShape::Gaussian(Tif::sample_antialiased(g, dx_mm, dy_mm)?, *g)
             }
             TifSource::Bonnet(p) => {
                 let m = BonnetTif::new(p)?;
@@ -125,46 +146,78 @@ impl ToolModel {
                     }
                     _ => Tif::sample(&m, dx_mm, dy_mm)?,
                 };
-                ToolModel::Bonnet(t, Box::new(m))
+                ToolShape::Bonnet(t, Box::new(m))
             }
+        };
+        Ok(ToolModel {
+            shape,
+            seen: pixels.response(dx_mm, dy_mm),
         })
+    }
+
+    /// The same tool seen by pixels of `response` (the shape is kept as it was read).
+    pub fn seen_by(self, response: PixelResponse) -> ToolModel {
+        ToolModel {
+            shape: self.shape,
+            seen: response,
+        }
+    }
+
+    /// How the maps' pixels see the removal (point samples unless a recipe says `area`).
+    pub fn response(&self) -> PixelResponse {
+        self.seen
+    }
+
+    /// The TIF's shape.
+    pub fn shape(&self) -> &ToolShape {
+        &self.shape
     }
 
     /// The TIF sampled at the map pitch.
     pub fn sampled(&self) -> &Tif {
-        match self {
-            ToolModel::Sampled(t)
-            | ToolModel::Measured(t, _)
-            | ToolModel::Gaussian(t, _)
-            | ToolModel::Bonnet(t, _) => t,
+        match &self.shape {
+            ToolShape::Sampled(t)
+            | ToolShape::Measured(t, _)
+            | ToolShape::Gaussian(t, _)
+            | ToolShape::Bonnet(t, _) => t,
         }
     }
 
     /// The fast-removal workspace on `grid`: a model's motion kernels come from the model
     /// itself (exact point values and one-pixel averages, see [`crate::tif::motion`]), a
     /// measured TIF's from its bilinear interpolant; either way they match what exact
-    /// deposition evaluates.
+    /// deposition of [`Self::seen_field`] evaluates. With area pixels every kernel is built
+    /// from the field's pixel means ([`FastRemoval::from_field_seen`]).
     pub fn fast_removal(&self, grid: &Grid) -> Result<FastRemoval, ProcessError> {
-        match self {
-            ToolModel::Sampled(t) => FastRemoval::new(t, grid),
-            ToolModel::Measured(_, m) => FastRemoval::from_field(m.as_ref(), grid),
-            ToolModel::Gaussian(_, g) => FastRemoval::from_field(g, grid),
-            ToolModel::Bonnet(_, b) => FastRemoval::from_field(b.as_ref(), grid),
+        let r = self.seen;
+        match &self.shape {
+            ToolShape::Sampled(t) if r.is_point() => FastRemoval::new(t, grid),
+            ToolShape::Sampled(t) => FastRemoval::from_field_seen(t, grid, r),
+            ToolShape::Measured(_, m) => FastRemoval::from_field_seen(m.as_ref(), grid, r),
+            ToolShape::Gaussian(_, g) => FastRemoval::from_field_seen(g, grid, r),
+            ToolShape::Bonnet(_, b) => FastRemoval::from_field_seen(b.as_ref(), grid, r),
         }
     }
 
-    /// The continuous field (analytic for models, bilinear for a measured TIF).
+    /// The continuous field (analytic for models, bilinear for a measured TIF): the TIF itself.
     pub fn field(&self) -> &dyn RateField {
-        match self {
-            ToolModel::Sampled(t) => t,
-            ToolModel::Measured(_, m) => m.as_ref(),
-            ToolModel::Gaussian(_, g) => g,
-            ToolModel::Bonnet(_, b) => b.as_ref(),
+        match &self.shape {
+            ToolShape::Sampled(t) => t,
+            ToolShape::Measured(_, m) => m.as_ref(),
+            ToolShape::Gaussian(_, g) => g,
+            ToolShape::Bonnet(_, b) => b.as_ref(),
         }
+    }
+
+    /// The field as the maps' pixels see it: its pixel mean ([`PixelMean`]; the field itself
+    /// for point samples). Exact deposition of this field is the removal those pixels read.
+    pub fn seen_field(&self) -> PixelMean<&dyn RateField> {
+        PixelMean::new(self.field(), self.seen)
     }
 }
 
-/// The tool model is the rate field it holds (so it can be shared as one).
+/// The tool model is the rate field it holds (so it can be shared as one): the TIF itself,
+/// not its pixel means.
 impl RateField for ToolModel {
     fn rate_at_mm(&self, dx_mm: f64, dy_mm: f64) -> f64 {
         self.field().rate_at_mm(dx_mm, dy_mm)
@@ -199,7 +252,13 @@ pub fn removal(
 ) -> Result<Array2<f64>, ProcessError> {
     match mode {
         Mode::Fast => tool.fast_removal(grid)?.removal(path, weights),
-        Mode::Exact => deposit_exact(path, tool.field(), grid, weights, &ExactOptions::default()),
+        Mode::Exact => deposit_exact(
+            path,
+            &tool.seen_field(),
+            grid,
+            weights,
+            &ExactOptions::default(),
+        ),
     }
 }
 

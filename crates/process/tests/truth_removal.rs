@@ -25,7 +25,7 @@ use bonnetlab_process::channels::Channels;
 use bonnetlab_process::path::PathLog;
 use bonnetlab_process::recipe::TifSource;
 use bonnetlab_process::removal::{deposit_exact, ExactOptions};
-use bonnetlab_process::simulate::{removal, Mode, ToolModel};
+use bonnetlab_process::simulate::{removal, Mode, ToolModel, ToolShape};
 use bonnetlab_process::tif::bonnet::BonnetTif;
 use bonnetlab_process::tif::derived::Channel;
 use bonnetlab_process::tif::measured::{MeasuredTif, Rim, SpotOptions as MeasuredSpotOptions};
@@ -316,7 +316,10 @@ fn tool_with_rim(truth: &Truth, px: f64, spot: Spot, rim: Rim) -> ToolModel {
         ..Default::default()
     };
     let m = MeasuredTif::from_spot(&map, SPOT_DWELL_S, &o).unwrap();
-    ToolModel::Measured(Tif::sample(&m, px, px).unwrap(), Box::new(m))
+    ToolModel::from(ToolShape::Measured(
+        Tif::sample(&m, px, px).unwrap(),
+        Box::new(m),
+    ))
 }
 
 fn run_case(

@@ -53,7 +53,10 @@ pub fn direct_removal_with(
         seed: opts.seed,
         substeps,
     };
-    v.deposit(&exec, input.tool.field(), &input.grid, |_| {
+    // The pixels' box around the widened footprint (not widened with it: its offset changes
+    // the footprint by about 1e-3, so the box's own widening is of that order of the box's
+    // 0.1 nm effect).
+    v.deposit(&exec, &input.tool.seen_field(), &input.grid, |_| {
         Modulation::default()
     })
 }

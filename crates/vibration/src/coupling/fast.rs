@@ -153,7 +153,13 @@ pub fn fast_maps_lagged(
     }
 
     let inst = offset_tif(input.tool.field(), p);
-    let kern = DerivativeKernels::sample(&inst, g.dx_mm, g.dy_mm, axis(p.lateral_axis));
+    let kern = DerivativeKernels::sample_seen(
+        &inst,
+        g.dx_mm,
+        g.dy_mm,
+        axis(p.lateral_axis),
+        input.tool.response(),
+    );
     let (hy, hx) = kern.half;
     let ext = g.grown(hy, hx);
     let mut ch = WeightedDwell::<NV>::new(ext);
