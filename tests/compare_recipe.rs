@@ -368,6 +368,49 @@ fn cli_compare_recipe_runs_writes_the_contract_fields() {
     assert!(html.contains("end-of-robot amplitude") && html.contains("paper&#39;s ~1e-2 mm"));
     assert!(html.contains("unexplained"));
 
+    // The same B read as a camera's pixels (`[measurement] pixels = "area"`): its calibration
+    // and its prediction say so, and the prediction is each pixel's mean, which flattens the
+    // raster's ripple at the pitch to sinc(pi D / PITCH) = 0.98862 of its amplitude (the
+    // pixel's box along y; analytic) while A's stays as it was.
+    let b_area = dir.path().join("B_area.toml");
+    std::fs::write(
+        &b_area,
+        std::fs::read_to_string(&b).unwrap().replacen(
+            "[measurement]\n",
+            "[measurement]\npixels = \"area\"\n",
+            1,
+        ),
+    )
+    .unwrap();
+    let out_area = dir.path().join("report_area");
+    let o = bin()
+        .arg("compare")
+        .arg("--run")
+        .arg(format!("A={}", a.display()))
+        .arg("--run")
+        .arg(format!("B={}", b_area.display()))
+        .arg("--out")
+        .arg(&out_area)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let ja: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_area.join("report.json")).unwrap())
+            .unwrap();
+    let sigma1 = |j: &serde_json::Value, k: usize| j["runs"][k]["predicted"]["sigma1_nm"].as_f64();
+    assert_eq!(ja["runs"][0]["calibration"]["pixels"], "point");
+    assert_eq!(ja["runs"][1]["calibration"]["pixels"], "area");
+    assert_eq!(sigma1(&ja, 0), sigma1(&j, 0));
+    let (point, area) = (sigma1(&j, 1).unwrap(), sigma1(&ja, 1).unwrap());
+    // Measured: 16.669 -> 16.481 nm, a ratio of 0.98872.
+    let x = std::f64::consts::PI * D / PITCH;
+    assert!(
+        (area / point - x.sin() / x).abs() < 1e-3,
+        "area {area} nm vs point {point} nm: ratio {} vs sinc {}",
+        area / point,
+        x.sin() / x
+    );
+
     // A bad recipe: one line naming it, exit 2, nothing written.
     let bad = dir.path().join("bad.toml");
     std::fs::write(&bad, "[measurement]\nbefore = 3\n").unwrap();

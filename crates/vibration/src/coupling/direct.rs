@@ -53,9 +53,10 @@ pub fn direct_removal_with(
         seed: opts.seed,
         substeps,
     };
-    // The pixels' box around the widened footprint (not widened with it: its offset changes
-    // the footprint by about 1e-3, so the box's own widening is of that order of the box's
-    // 0.1 nm effect).
+    // Area pixels: the pixel-mean field, which the offset's change then widens with the
+    // footprint (by a factor sqrt(1 + delta / h0), about 1 + delta / (2 h0)), so the box is
+    // off by that fraction of its own effect (a few per cent of it at the paper's offset
+    // swings). The fast kernels take the box outermost (`DerivativeKernels::sample_seen`).
     v.deposit(&exec, &input.tool.seen_field(), &input.grid, |_| {
         Modulation::default()
     })
