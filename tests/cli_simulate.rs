@@ -3,13 +3,25 @@
 //! mean matches the analytic volume rate x dwell per area. (The full generated-run check,
 //! measured spot + noise vs an independent deposition, is not written yet.)
 
-use std::process::Command;
+use std::process::{Command, Output};
 
 use bonnetlab::io::{write_surface, MapFormat};
 use bonnetlab::process::path::log::path_to_csv;
 use bonnetlab::process::RasterSpec;
 use bonnetlab::surface::Surface;
 use ndarray::Array2;
+
+/// `bonnetlab simulate RECIPE [ARGS] --out OUT`.
+fn simulate(recipe: &std::path::Path, out: &std::path::Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
+        .arg("simulate")
+        .arg(recipe)
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap()
+}
 
 #[test]
 fn simulate_writes_maps_json_and_plots() {
@@ -33,15 +45,8 @@ fn simulate_writes_maps_json_and_plots() {
     )
     .unwrap();
     let out = d.join("out");
-    let o = Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
-        .args(["simulate"])
-        .arg(d.join("recipe.toml"))
-        // The nominal prediction (the analytic mean below has no vibration in it).
-        .arg("--no-vibration")
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+    // The nominal prediction (the analytic mean below has no vibration in it).
+    let o = simulate(&d.join("recipe.toml"), &out, &["--no-vibration"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     for f in [
         "predicted_after.dat",
@@ -80,14 +85,7 @@ fn simulate_writes_maps_json_and_plots() {
     let predict = |name: &str, recipe: String| {
         std::fs::write(d.join(format!("{name}.toml")), recipe).unwrap();
         let out = d.join(name);
-        let o = Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
-            .arg("simulate")
-            .arg(d.join(format!("{name}.toml")))
-            .arg("--no-vibration")
-            .arg("--out")
-            .arg(&out)
-            .output()
-            .unwrap();
+        let o = simulate(&d.join(format!("{name}.toml")), &out, &["--no-vibration"]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let v: serde_json::Value =
             serde_json::from_slice(&std::fs::read(out.join("simulation.json")).unwrap()).unwrap();
@@ -149,13 +147,7 @@ fn simulate_writes_maps_json_and_plots() {
     assert!((ma / mp - 1.0).abs() < 1e-3, "{ma} vs {mp}");
     // Bad recipe: one line naming the file and key, exit 2.
     std::fs::write(d.join("bad.toml"), "[measurement]\nbefore = \"before.dat\"\n[tif]\nspot = \"s.dat\"\n[path]\nlog = \"p.csv\"\n").unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_bonnetlab"))
-        .arg("simulate")
-        .arg(d.join("bad.toml"))
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = simulate(&d.join("bad.toml"), &out, &[]);
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.toml") && err.contains("dwell_s"), "{err}");

@@ -160,9 +160,10 @@ impl DerivativeKernels {
     }
 
     /// The kernels as pixels of `response` see the removal: with area pixels every kernel
-    /// value is the box mean ([`PixelResponse::mean_of`]) of the instantaneous rate's
-    /// derivative, taken outermost (after the footprint's widening with the offset), so the
-    /// box does not widen with it.
+    /// value is the box mean ([`PixelResponse::mean_of`]) of the instantaneous rate, taken
+    /// outermost (after the footprint's widening with the offset, so the box does not widen
+    /// with it), and differenced as the point kernels are (one pixel along the lateral axis,
+    /// `OFFSET_STEP` of h0 in the offset).
     pub fn sample_seen(
         t: &OffsetTif<'_>,
         dx_mm: f64,
@@ -170,13 +171,14 @@ impl DerivativeKernels {
         lateral: Axis,
         response: PixelResponse,
     ) -> DerivativeKernels {
-        if !response.is_point() {
-            return Self::sample_area(t, dx_mm, dy_mm, lateral, response);
-        }
         let eh = OFFSET_STEP * t.h0_mm;
         let (ex, ey) = t.half_extent_mm(2.0 * eh);
-        let hx = (ex / dx_mm).ceil() as usize + 2;
-        let hy = (ey / dy_mm).ceil() as usize + 2;
+        let (bx, by) = match response {
+            PixelResponse::Area { dx_mm, dy_mm } => (0.5 * dx_mm, 0.5 * dy_mm),
+            PixelResponse::Point => (0.0, 0.0),
+        };
+        let hx = ((ex + bx) / dx_mm).ceil() as usize + 2;
+        let hy = ((ey + by) / dy_mm).ceil() as usize + 2;
         let shape = (2 * hy + 1, 2 * hx + 1);
         let (lx, ly) = lateral.unit();
         let el = match lateral {
@@ -191,9 +193,16 @@ impl DerivativeKernels {
                 let mut out = vec![[0.0; 7]; shape.1];
                 for (j, o) in out.iter_mut().enumerate() {
                     let x = (j as f64 - hx as f64) * dx_mm;
-                    let at = |s: f64| t.rate(x + s * lx * el, y + s * ly * el, 0.0);
-                    // Pixel-area mean: the footprint edge moves continuously with δ, so the
-                    // offset derivatives of a footprint with a hard edge stay bounded.
+                    // The rate with the tool moved s pixels along the lateral axis and the
+                    // offset changed by d, as the map's pixel reads it.
+                    let seen = |s: f64, d: f64| {
+                        let (px, py) = (x + s * lx * el, y + s * ly * el);
+                        response.mean_of(px, py, |a, b| t.rate(a, b, d))
+                    };
+                    // Point samples: the lateral kernels at the point; the offset kernels as
+                    // pixel-area means (the footprint edge moves continuously with δ, so the
+                    // offset derivatives of a footprint with a hard edge stay bounded), taken
+                    // back to point values below.
                     let avg = |s: f64, d: f64| {
                         let mut acc = 0.0;
                         for a in 0..n {
@@ -205,15 +214,22 @@ impl DerivativeKernels {
                         }
                         acc / (n * n) as f64
                     };
-                    let (c, p, m) = (at(0.0), at(1.0), at(-1.0));
+                    let off = |s: f64, d: f64| {
+                        if response.is_point() {
+                            avg(s, d)
+                        } else {
+                            seen(s, d)
+                        }
+                    };
+                    let (c, p, m) = (seen(0.0, 0.0), seen(1.0, 0.0), seen(-1.0, 0.0));
                     o[0] = (p - m) / (2.0 * el);
                     o[1] = (p - 2.0 * c + m) / (el * el);
-                    let (ac, hp, hm) = (avg(0.0, 0.0), avg(0.0, eh), avg(0.0, -eh));
+                    let (ac, hp, hm) = (off(0.0, 0.0), off(0.0, eh), off(0.0, -eh));
                     o[2] = (hp - hm) / (2.0 * eh);
                     o[3] = (hp - 2.0 * ac + hm) / (eh * eh);
-                    let dh = |s: f64| (avg(s, eh) - avg(s, -eh)) / (2.0 * eh);
+                    let dh = |s: f64| (off(s, eh) - off(s, -eh)) / (2.0 * eh);
                     o[4] = (dh(1.0) - dh(-1.0)) / (2.0 * el);
-                    let (hp2, hm2) = (avg(0.0, 2.0 * eh), avg(0.0, -2.0 * eh));
+                    let (hp2, hm2) = (off(0.0, 2.0 * eh), off(0.0, -2.0 * eh));
                     o[5] = (hp2 - 2.0 * hp + 2.0 * hm - hm2) / (2.0 * eh * eh * eh);
                     o[6] = (hp2 - 4.0 * hp + 6.0 * ac - 4.0 * hm + hm2) / (eh * eh * eh * eh);
                 }
@@ -221,12 +237,16 @@ impl DerivativeKernels {
             })
             .collect();
         let pick = |c: usize| Array2::from_shape_fn(shape, |(i, j)| rows[i][j][c]);
-        // The offset kernels are pixel-area means: the mean over a dx x dy pixel is the point
-        // value plus (dx² ∂xx + dy² ∂yy) / 24, a low-pass of 1 − (π f dx)² / 6 that took 2-4 %
-        // of the imprint's power at 0.30-0.46 per mm on 0.25 mm pixels (the exact deposition
-        // evaluates the rate at pixel centres). Taken back to second order in the pixel.
+        // The offset kernels of point samples are pixel-area means: the mean over a dx x dy
+        // pixel is the point value plus (dx² ∂xx + dy² ∂yy) / 24, a low-pass of
+        // 1 − (π f dx)² / 6 that took 2-4 % of the imprint's power at 0.30-0.46 per mm on
+        // 0.25 mm pixels (the exact deposition evaluates the rate at pixel centres). Taken back
+        // to second order in the pixel; area pixels keep their means.
         let point = |c: usize| {
             let a = pick(c);
+            if !response.is_point() {
+                return a;
+            }
             let at = |i: isize, j: isize| {
                 if i < 0 || j < 0 || i as usize >= shape.0 || j as usize >= shape.1 {
                     0.0
@@ -250,67 +270,6 @@ impl DerivativeKernels {
             klh: point(4),
             khhh: point(5),
             khhhh: point(6),
-            half: (hy, hx),
-        }
-    }
-
-    /// [`Self::sample_seen`] for area pixels: the derivatives of the box mean, by the same
-    /// differences (one pixel along the lateral axis, `OFFSET_STEP` of h0 in the offset).
-    fn sample_area(
-        t: &OffsetTif<'_>,
-        dx_mm: f64,
-        dy_mm: f64,
-        lateral: Axis,
-        response: PixelResponse,
-    ) -> DerivativeKernels {
-        let eh = OFFSET_STEP * t.h0_mm;
-        let (ex, ey) = t.half_extent_mm(2.0 * eh);
-        let (bx, by) = match response {
-            PixelResponse::Area { dx_mm, dy_mm } => (0.5 * dx_mm, 0.5 * dy_mm),
-            PixelResponse::Point => (0.0, 0.0),
-        };
-        let hx = ((ex + bx) / dx_mm).ceil() as usize + 2;
-        let hy = ((ey + by) / dy_mm).ceil() as usize + 2;
-        let shape = (2 * hy + 1, 2 * hx + 1);
-        let (lx, ly) = lateral.unit();
-        let el = match lateral {
-            Axis::X => dx_mm,
-            Axis::Y => dy_mm,
-        };
-        let rows: Vec<Vec<[f64; 7]>> = (0..shape.0)
-            .into_par_iter()
-            .map(|i| {
-                let y = (i as f64 - hy as f64) * dy_mm;
-                let mut out = vec![[0.0; 7]; shape.1];
-                for (j, o) in out.iter_mut().enumerate() {
-                    let x = (j as f64 - hx as f64) * dx_mm;
-                    let seen = |s: f64, d: f64| {
-                        response.mean_of(x + s * lx * el, y + s * ly * el, |a, b| t.rate(a, b, d))
-                    };
-                    let (c, p, m) = (seen(0.0, 0.0), seen(1.0, 0.0), seen(-1.0, 0.0));
-                    o[0] = (p - m) / (2.0 * el);
-                    o[1] = (p - 2.0 * c + m) / (el * el);
-                    let (hp, hm) = (seen(0.0, eh), seen(0.0, -eh));
-                    o[2] = (hp - hm) / (2.0 * eh);
-                    o[3] = (hp - 2.0 * c + hm) / (eh * eh);
-                    let dh = |s: f64| (seen(s, eh) - seen(s, -eh)) / (2.0 * eh);
-                    o[4] = (dh(1.0) - dh(-1.0)) / (2.0 * el);
-                    let (hp2, hm2) = (seen(0.0, 2.0 * eh), seen(0.0, -2.0 * eh));
-                    o[5] = (hp2 - 2.0 * hp + 2.0 * hm - hm2) / (2.0 * eh * eh * eh);
-                    o[6] = (hp2 - 4.0 * hp + 6.0 * c - 4.0 * hm + hm2) / (eh * eh * eh * eh);
-                }
-                out
-            })
-            .collect();
-        let pick = |c: usize| Array2::from_shape_fn(shape, |(i, j)| rows[i][j][c]);
-        DerivativeKernels {
-            kl: pick(0),
-            kll: pick(1),
-            kh: pick(2),
-            khh: pick(3),
-            klh: pick(4),
-            khhh: pick(5),
-            khhhh: pick(6),
             half: (hy, hx),
         }
     }
