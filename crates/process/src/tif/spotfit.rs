@@ -528,7 +528,7 @@ mod tests {
         // radius within 5e-5. Five Gauss-Legendre nodes per axis on every box put the centre
         // 2-8e-4 mm off (the square-root rim; a path offset of that size in a calibration).
         // Measured with the rim's boxes in 4 x 4 cells: centre errors at most 6.4e-5 mm,
-        // radius errors at most 1.5e-5.
+        // radius errors at most 2.8e-5 (with five nodes: 2.4e-4).
         let (p, m, start) = offset_bonnet(24.0);
         let (px, n) = (0.25, 49usize);
         let a = p.contact_radius_mm();
