@@ -58,6 +58,14 @@ pub trait Effect: Send + Sync {
     fn nl_unresolved(&self, _p: &Problem) -> Vec<f64> {
         vec![0.0; self.nl().len()]
     }
+    /// Per non-linear parameter, the step of a bracketing scan of the profiled residual after
+    /// the Levenberg-Marquardt steps (0: none; see `refine::scan_profile`). For a parameter whose
+    /// residual is not quadratic beyond a short span (a step time: the misassigned stretch of
+    /// path adds its removal, so the sum of squares grows like |error| once the stretch is longer
+    /// than the spot), where forward-difference Gauss-Newton steps crawl.
+    fn nl_scan(&self, _p: &Problem) -> Vec<f64> {
+        vec![0.0; self.nl().len()]
+    }
     /// Whether the non-linear parameters move the executed path or the kernel (else only the
     /// measured map): decides what must be recomputed.
     fn moves_path(&self) -> bool {
