@@ -51,6 +51,13 @@ pub trait Effect: Send + Sync {
     fn nl_steps(&self) -> Vec<f64> {
         Vec::new()
     }
+    /// The finite-difference steps of the uncertainties' Jacobian (`uncertainty`): the local
+    /// derivative at the fitted state, where [`Self::nl_steps`] may be wider for the
+    /// refinement's sake (a secant that smooths the residual's small-scale roughness on the
+    /// way to the minimum). The same by default.
+    fn nl_sigma_steps(&self) -> Vec<f64> {
+        self.nl_steps()
+    }
     /// Per non-linear parameter, the width of the interval around its value that the data
     /// cannot resolve at all (a step time that falls while the tool is off the measured
     /// aperture: the residual is flat across that span). The uncertainty adds `width / sqrt(12)`

@@ -33,14 +33,23 @@ pub fn set_nl(effects: &mut [Box<dyn Effect>], v: &[f64]) {
 }
 
 /// Forward-difference Jacobian columns of the profiled residual, and the evaluations' residuals.
+/// Steps of the non-linear parameters' differences for the uncertainties (see
+/// `Effect::nl_sigma_steps`), in [`jacobian`]'s order.
+pub fn sigma_steps(effects: &[Box<dyn Effect>]) -> Vec<f64> {
+    effects.iter().flat_map(|e| e.nl_sigma_steps()).collect()
+}
+
+/// The columns with forward differences of `steps` (the refinement's `nl_steps`, or
+/// [`sigma_steps`] for the uncertainties).
 pub fn jacobian(
     p: &Problem,
     effects: &[Box<dyn Effect>],
     ev0: &Eval,
     f0: &Fit,
     profiled: bool,
+    steps: &[f64],
 ) -> Result<Vec<Vec<f64>>, CalibrateError> {
-    let (theta, steps) = nl_vec(effects);
+    let (theta, _) = nl_vec(effects);
     // Registration parameters: analytic columns from the smoothed after map (see
     // `effects::registration`), profiled by projecting out the linear columns.
     let mut analytic: Vec<Option<Vec<f64>>> = vec![None; theta.len()];
@@ -64,7 +73,7 @@ pub fn jacobian(
             if analytic[i].is_some() {
                 return Ok(None);
             }
-            numeric_column(p, effects, ev0, f0, profiled, &theta, &steps, i).map(Some)
+            numeric_column(p, effects, ev0, f0, profiled, &theta, steps, i).map(Some)
         })
         .collect();
     let mut cols = Vec::with_capacity(theta.len());
@@ -169,7 +178,8 @@ impl LmProblem for Refinement<'_> {
 
     fn jacobian(&mut self, x: &[f64], s: &(Eval, Fit)) -> Result<Vec<Vec<f64>>, CalibrateError> {
         self.effects = self.at(x).0;
-        jacobian(self.p, &self.effects, &s.0, &s.1, true)
+        let steps = nl_vec(&self.effects).1;
+        jacobian(self.p, &self.effects, &s.0, &s.1, true, &steps)
     }
 
     fn propose(&self, x: &[f64], step: &[f64]) -> Vec<f64> {

@@ -7,7 +7,7 @@
 
 use crate::error::CalibrateError;
 use crate::model::{Effect, Eval, Fit, Linear, Param, Problem};
-use crate::refine::{jacobian, set_nl};
+use crate::refine::{jacobian, set_nl, sigma_steps};
 use crate::selection::Split;
 
 /// Numeric parameters of all effects as one flat vector (for the delta method).
@@ -75,7 +75,7 @@ pub fn uncertainties_and_correlations(
     let lin0 = ev.linear(f);
     let base = flat_params(effects, &lin0);
     let theta0: Vec<f64> = effects.iter().flat_map(|e| e.nl()).collect();
-    let steps: Vec<f64> = effects.iter().flat_map(|e| e.nl_steps()).collect();
+    let steps = sigma_steps(effects);
     let unresolved: Vec<f64> = effects.iter().flat_map(|e| e.nl_unresolved(p)).collect();
     let mut grads = vec![vec![0.0; n]; base.len()];
     for j in 0..n {
@@ -164,7 +164,7 @@ fn joint_columns(
         .map(|c| c.iter().zip(&ev.w).map(|(a, w)| a * w).collect())
         .collect();
     let nlin = cols.len();
-    cols.extend(jacobian(p, effects, ev, f, false)?);
+    cols.extend(jacobian(p, effects, ev, f, false, &sigma_steps(effects))?);
     Ok((cols, nlin))
 }
 

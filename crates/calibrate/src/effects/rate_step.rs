@@ -9,12 +9,12 @@ use crate::model::{Channel, Effect, Linear, Param, Problem};
 #[derive(Debug, Clone)]
 pub struct RateStep {
     pub at_tau: f64,
-    /// Forward-difference step of the step time (run-time fraction): [`scan_step`], inside
-    /// the span where the residual is quadratic in the step time. The former fixed 0.004 of
-    /// the run (about 3 s, 15 mm of path on issue 15's harness) spanned the profile's V, so its
-    /// columns were secants: the refinement crawled (see `Effect::nl_scan`) and the step
-    /// time's sigma came out about 1.6x wide once the estimate sat at the minimum (harness,
-    /// 50 runs: 1-sigma cover of the step time 45/50 with 0.004, 34/50 with this step).
+    /// The uncertainties' difference step of the step time (run-time fraction): [`scan_step`],
+    /// inside the span where the residual is quadratic in the step time. The refinement's
+    /// [`REFINE_STEP`] (about 3 s, 15 mm of path on issue 15's harness) spans the profile's V:
+    /// its column is a secant, and the step time's sigma from it came out about 1.6x wide
+    /// once the estimate sat at the minimum (harness, 50 runs: 1-sigma cover of the step time
+    /// 45/50 with 0.004, 34/50 with this step).
     pub h_tau: f64,
 }
 
@@ -58,8 +58,12 @@ fn step_weights(taus: &[f64], at: f64) -> Vec<f64> {
         .collect()
 }
 
-/// The step time's forward-difference step when the run has no feed to scale it by.
-const FALLBACK_STEP: f64 = 0.004;
+/// The refinement's difference step of the step time (run-time fraction): a secant across
+/// several spot transits, which carries the steps over the residual's small-scale roughness
+/// (a step of [`scan_step`] there left two runs of issue 15's harness 50 at 0.0015-0.004 of the
+/// run from the truth, process band 1.08-1.45x the floor, where this one and the scan found
+/// every run's minimum). Also the uncertainties' step when the run has no feed to scale by.
+const REFINE_STEP: f64 = 0.004;
 
 /// The step time's scan step (run-time fraction, see `Effect::nl_scan`): the time the tool
 /// takes to travel half the TIF radius at the median feed, over the run's duration. Within
@@ -152,6 +156,9 @@ impl Effect for RateStep {
         self.at_tau = v[0].clamp(0.0, 1.0);
     }
     fn nl_steps(&self) -> Vec<f64> {
+        vec![REFINE_STEP]
+    }
+    fn nl_sigma_steps(&self) -> Vec<f64> {
         vec![self.h_tau]
     }
     fn moves_path(&self) -> bool {
@@ -202,7 +209,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
     let at = best.1;
     let h_tau = match scan_step(p) {
         d if d > 0.0 => d,
-        _ => FALLBACK_STEP,
+        _ => REFINE_STEP,
     };
     let g = step(p, at);
     let col = cur.column(&[(&s.centred(&g), Channel::Value)]);
