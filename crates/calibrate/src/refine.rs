@@ -250,8 +250,9 @@ const SCAN_POINTS: usize = 8;
 const SCAN_TOL: f64 = 1.0 / 64.0;
 
 /// Non-linear parameter `k` of `effects` moved to the least profiled mean square near it, the
-/// others held: a coarse scan at `d` steps, `SCAN_POINTS` on each side (side by side), then a
-/// golden-section search over one step either side of the best point to `d * SCAN_TOL`.
+/// others held: a coarse scan at `d` steps outwards, up to `SCAN_POINTS` on each side, until
+/// the best point is bracketed, then a golden-section search over one step either side of
+/// it to `d * SCAN_TOL`.
 /// `effects` is updated and the new state returned only when the cost fell below `current`'s.
 /// For parameters (see `Effect::nl_scan`) whose profile is V-shaped beyond a short span: there
 /// the forward-difference Gauss-Newton steps of the refinement move a few 1e-5 of the run per
@@ -278,15 +279,19 @@ fn scan_profile(
         Ok(cost(&fit(&ev, &[])?))
     };
     let start = cost(&current.1);
-    let points: Vec<f64> = (1..=SCAN_POINTS)
-        .flat_map(|i| [x0[k] - i as f64 * d, x0[k] + i as f64 * d])
-        .collect();
-    let costs: Vec<Result<f64, CalibrateError>> = points.par_iter().map(|&t| cost_at(t)).collect();
     let (mut best_t, mut best_c) = (x0[k], start);
-    for (&t, c) in points.iter().zip(costs) {
-        let c = c?;
-        if c < best_c {
-            (best_t, best_c) = (t, c);
+    // Outwards a pair at a time (the two side by side) until the best point has a higher one
+    // beyond it on both sides: two evaluations where the refinement ended at the minimum.
+    for i in 1..=SCAN_POINTS {
+        let pair = [x0[k] - i as f64 * d, x0[k] + i as f64 * d];
+        let (a, b) = rayon::join(|| cost_at(pair[0]), || cost_at(pair[1]));
+        for (t, c) in pair.into_iter().zip([a?, b?]) {
+            if c < best_c {
+                (best_t, best_c) = (t, c);
+            }
+        }
+        if (best_t - x0[k]).abs() < (i as f64 - 0.5) * d {
+            break;
         }
     }
     // Golden section over [best - d, best + d] (a bracket when the scan's best is inside it).
