@@ -32,15 +32,15 @@ pub fn set_nl(effects: &mut [Box<dyn Effect>], v: &[f64]) {
     }
 }
 
-/// Forward-difference Jacobian columns of the profiled residual, and the evaluations' residuals.
 /// Steps of the non-linear parameters' differences for the uncertainties (see
 /// `Effect::nl_sigma_steps`), in [`jacobian`]'s order.
 pub fn sigma_steps(effects: &[Box<dyn Effect>]) -> Vec<f64> {
     effects.iter().flat_map(|e| e.nl_sigma_steps()).collect()
 }
 
-/// The columns with forward differences of `steps` (the refinement's `nl_steps`, or
-/// [`sigma_steps`] for the uncertainties).
+/// Forward-difference Jacobian columns of the profiled residual (or, not `profiled`, of the
+/// residual at the same linear coefficients), with steps `steps` (the refinement's
+/// `nl_steps`, or [`sigma_steps`] for the uncertainties).
 pub fn jacobian(
     p: &Problem,
     effects: &[Box<dyn Effect>],

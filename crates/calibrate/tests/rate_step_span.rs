@@ -92,7 +92,7 @@ fn step_time_off_the_aperture_is_uncertain_over_the_unseen_span() {
 /// brute-force scan of the profiled residual (every eighth of the scan step over +-0.012 of the
 /// run) and against the generator's step time (exact time-domain deposition, textured surface).
 /// Without the scan (`RateStep::nl_scan` at 0) the start 0.558 refines to 0.55289, mean square
-/// 3.008 against the minimum's 2.955 nm^2, and this fails; with it, 0.54997 and 0.54996.
+/// 3.008 against the minimum's 2.955 nm^2, and this fails; with it, 0.54997 from both starts.
 #[test]
 fn a_step_time_started_far_off_is_refined_to_the_profile_minimum() {
     use bonnetlab_calibrate::effects::rate_step::{scan_step, RateStep};

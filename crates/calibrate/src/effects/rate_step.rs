@@ -9,12 +9,13 @@ use crate::model::{Channel, Effect, Linear, Param, Problem};
 #[derive(Debug, Clone)]
 pub struct RateStep {
     pub at_tau: f64,
-    /// The uncertainties' difference step of the step time (run-time fraction): [`scan_step`],
-    /// inside the span where the residual is quadratic in the step time. The refinement's
-    /// [`REFINE_STEP`] (about 3 s, 15 mm of path on issue 15's harness) spans the profile's V:
-    /// its column is a secant, and the step time's sigma from it came out about 1.6x wide
-    /// once the estimate sat at the minimum (harness, 50 runs: 1-sigma cover of the step time
-    /// 45/50 with 0.004, 34/50 with this step).
+    /// The step time's scan step and the uncertainties' difference step (run-time fraction):
+    /// [`scan_step`], inside the span where the residual is quadratic in the step time (0 when
+    /// the run has no feed: no scan, and the uncertainties take [`REFINE_STEP`]). The
+    /// refinement's [`REFINE_STEP`] (about 3 s, 15 mm of path on issue 15's harness) spans the
+    /// profile's V: its column is a secant, and the step time's sigma from it came out about
+    /// 1.6x wide once the estimate sat at the minimum (harness, 50 runs: 1-sigma cover of the
+    /// step time 45/50 with 0.004, 34/50 with this step).
     pub h_tau: f64,
 }
 
@@ -159,13 +160,17 @@ impl Effect for RateStep {
         vec![REFINE_STEP]
     }
     fn nl_sigma_steps(&self) -> Vec<f64> {
-        vec![self.h_tau]
+        vec![if self.h_tau > 0.0 {
+            self.h_tau
+        } else {
+            REFINE_STEP
+        }]
     }
     fn moves_path(&self) -> bool {
         true
     }
-    fn nl_scan(&self, p: &Problem) -> Vec<f64> {
-        vec![scan_step(p)]
+    fn nl_scan(&self, _p: &Problem) -> Vec<f64> {
+        vec![self.h_tau]
     }
     fn nl_unresolved(&self, p: &Problem) -> Vec<f64> {
         vec![unseen_span(p, self.at_tau)]
@@ -207,10 +212,7 @@ pub fn candidates(cur: &Current) -> Vec<Candidate> {
         }
     }
     let at = best.1;
-    let h_tau = match scan_step(p) {
-        d if d > 0.0 => d,
-        _ => REFINE_STEP,
-    };
+    let h_tau = scan_step(p);
     let g = step(p, at);
     let col = cur.column(&[(&s.centred(&g), Channel::Value)]);
     vec![Candidate {
