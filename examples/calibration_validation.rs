@@ -13,7 +13,8 @@
 //! ```
 //!
 //! With `BONNETLAB_HARNESS_EFFECTS` set, each run also logs its accepted effects as the
-//! calibration's JSON writes them (every parameter with its uncertainty).
+//! calibration's JSON writes them (every parameter with its uncertainty), and any candidate
+//! reported below the size bars (`unexplained[].below_bar`) beside the injected effect.
 //!
 //! `--signal` (a diagnostic, logged per run on stderr, not tabulated): the injected effect's
 //! identifiable signal, i.e. the effect run's after map minus its twin's without the effect (same
@@ -679,6 +680,18 @@ fn main() {
                             "{kind} x{size} run {r}: effects {}",
                             serde_json::to_string(&cal.effects).unwrap_or_default()
                         );
+                        let below: Vec<_> = cal
+                            .unexplained
+                            .iter()
+                            .filter_map(|u| u.below_bar.as_ref())
+                            .collect();
+                        if !below.is_empty() {
+                            eprintln!(
+                                "{kind} x{size} run {r}: below the bars {} (injected {:?})",
+                                serde_json::to_string(&below).unwrap_or_default(),
+                                cfg.effects
+                            );
+                        }
                     }
                     o
                 }

@@ -26,6 +26,154 @@ pub struct Unexplained {
     pub direction: String,
     /// [x_min, x_max, y_min, y_max] in mm.
     pub region_mm: [f64; 4],
+    /// Set when the entry is a candidate effect significant on held-out data but below the
+    /// selection's size bar (so not added to the model): what it is and how large.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub below_bar: Option<BelowBar>,
+}
+
+/// A candidate effect that the held-out test finds (z at least `run::REPORT_Z`) but whose
+/// held-out reduction of the sum of squares is under the size bar an effect needs to be
+/// added (`selection::MIN_FRACTION`, the fallback's `FALLBACK_FRACTION`).
+#[derive(Debug, Clone, Serialize)]
+pub struct BelowBar {
+    pub kind: String,
+    pub key: String,
+    pub heldout_z: f64,
+    pub heldout_reduction_fraction: f64,
+    /// Its parameters refined jointly with the accepted effects, as `effects[].params`.
+    pub params: serde_json::Map<String, serde_json::Value>,
+    /// The full-band residual RMS (nm) the model would leave with it added.
+    pub residual_rms_if_added_nm: f64,
+    /// Other kinds significant on the same residual below the bars: (key, held-out z).
+    pub also: Vec<(String, f64)>,
+    /// Peak of the one-sided 1-D PSD of its added removal along `direction` (cycles/mm; set by
+    /// [`below_bar_entry`]).
+    pub peak_per_mm: f64,
+    /// The forward model's stated accuracy on this run (nm RMS: `run::MODEL_ACCURACY` of the
+    /// measured removal's RMS). An added removal smaller than this may be the model's own error
+    /// rather than the run's.
+    pub model_accuracy_nm: f64,
+}
+
+/// The entry for a below-bar candidate whose added removal (nm, full grid) is `map`: its RMS
+/// (mean removed) over the valid pixels, the direction of its 1-D PSDs (one-sided) holding
+/// more power and the band holding the central 80 % of that power, and its region.
+pub fn below_bar_entry(
+    g: &MapGrid,
+    map: &Array2<f64>,
+    valid: &Array2<bool>,
+    mut what: BelowBar,
+    summary: &str,
+) -> Unexplained {
+    let (mut s, mut n) = (0.0f64, 0.0f64);
+    for (v, ok) in map.iter().zip(valid) {
+        if *ok {
+            s += v;
+            n += 1.0;
+        }
+    }
+    let mean = s / n.max(1.0);
+    let ss: f64 = map
+        .iter()
+        .zip(valid)
+        .filter(|(_, ok)| **ok)
+        .map(|(v, _)| (v - mean) * (v - mean))
+        .sum();
+    let rms = (ss / n.max(1.0)).sqrt();
+    let (direction, band, peak) = power_band(g, map, valid);
+    what.peak_per_mm = peak;
+    let (bbox, share) = region(g, map, valid, band[1].max(1e-3));
+    let caveat = if rms < what.model_accuracy_nm {
+        format!(
+            " (smaller than the forward model's accuracy on this run, {:.3} nm RMS: it may be \
+             the model's own error)",
+            what.model_accuracy_nm
+        )
+    } else {
+        String::new()
+    };
+    let also = if what.also.is_empty() {
+        String::new()
+    } else {
+        let v: Vec<String> = what
+            .also
+            .iter()
+            .map(|(k, z)| format!("{k} (z {z:.1})"))
+            .collect();
+        format!(
+            "; also significant below the bars on this residual: {}",
+            v.join(", ")
+        )
+    };
+    Unexplained {
+        description: format!(
+            "{}: significant on held-out data (z {:.1}) but under the size bar ({:.3} % of the \
+             held-out sum of squares), so not added to the model: {summary}; {rms:.3} nm RMS{caveat} \
+             varying along {direction}, peaking at {peak:.3} /mm (period {:.2} mm), 80 % of its \
+             power at {:.3}-{:.3} /mm (periods {:.2}-{:.2} mm), {}{also}",
+            what.key,
+            what.heldout_z,
+            100.0 * what.heldout_reduction_fraction,
+            1.0 / peak.max(1e-12),
+            band[0],
+            band[1],
+            1.0 / band[1].max(1e-12),
+            1.0 / band[0].max(1e-12),
+            located(bbox, share)
+        ),
+        band_per_mm: band,
+        rms_nm: rms,
+        direction: direction.into(),
+        region_mm: bbox,
+        below_bar: Some(what),
+    }
+}
+
+/// The direction ("x" or "y") whose one-sided 1-D PSD of `map` holds more power, the band
+/// (cycles/mm) from 10 % to 90 % of that PSD's cumulative power, and the PSD's peak (cycles/mm).
+fn power_band(
+    g: &MapGrid,
+    map: &Array2<f64>,
+    valid: &Array2<bool>,
+) -> (&'static str, [f64; 2], f64) {
+    let nyq = 0.5 / g.dx_mm.max(g.dy_mm);
+    let Ok(surf) = Surface::with_mask(map.clone(), valid.clone(), Some(g.dx_mm), Some(g.dy_mm))
+    else {
+        return ("both", [0.0, nyq], 0.0);
+    };
+    let opts = PsdOptions::default();
+    let mut best: Option<(&'static str, f64, Vec<f64>, Vec<f64>)> = None;
+    for (dir, psd) in [("x", psd_x(&surf, &opts)), ("y", psd_y(&surf, &opts))] {
+        let Ok(p) = psd else { continue };
+        let total: f64 = p.psd_nm2_mm.iter().sum();
+        if best.as_ref().is_none_or(|b| total > b.1) {
+            best = Some((dir, total, p.freq_per_mm, p.psd_nm2_mm));
+        }
+    }
+    let Some((dir, total, f, psd)) = best else {
+        return ("both", [0.0, nyq], 0.0);
+    };
+    if total.is_nan() || total <= 0.0 {
+        return (dir, [0.0, nyq], 0.0);
+    }
+    let peak = f
+        .iter()
+        .zip(&psd)
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0.0, |(fk, _)| *fk);
+    let (mut cum, mut lo, mut hi) = (0.0, None, None);
+    for (fk, pk) in f.iter().zip(&psd) {
+        cum += pk;
+        if lo.is_none() && cum >= 0.1 * total {
+            lo = Some(*fk);
+        }
+        if hi.is_none() && cum >= 0.9 * total {
+            hi = Some(*fk);
+        }
+    }
+    let lo = lo.unwrap_or(0.0);
+    (dir, [lo, hi.unwrap_or(nyq).max(lo)], peak)
 }
 
 fn region(g: &MapGrid, r: &Array2<f64>, valid: &Array2<bool>, f_hi: f64) -> ([f64; 4], f64) {
@@ -120,6 +268,7 @@ pub fn find_by_band(
                 rms_nm: excess,
                 direction: "both".into(),
                 region_mm: bbox,
+                below_bar: None,
             });
         }
     }
@@ -207,6 +356,7 @@ fn find_in(
                         rms_nm: rms,
                         direction: dir.into(),
                         region_mm: bbox,
+                        below_bar: None,
                     });
                 }
             } else {
@@ -233,6 +383,7 @@ fn find_in(
             rms_nm: excess_total,
             direction: "both".into(),
             region_mm: bbox,
+            below_bar: None,
         });
     }
     out
