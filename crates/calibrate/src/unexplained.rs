@@ -401,3 +401,60 @@ fn located(bbox: [f64; 4], share: f64) -> String {
         if share < 0.3 { "local" } else { "widespread" }
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A cosine along y (period 4 mm) on a 120 x 100 map of 0.5 mm pixels with a round hole
+    /// masked out: its entry varies along y, peaks at 0.25 /mm within a bin of the 60 mm map's
+    /// PSD, has the band around it and the cosine's RMS (amplitude / sqrt 2) within 2 %.
+    #[test]
+    fn a_below_bar_entry_finds_the_direction_peak_and_rms_of_its_removal() {
+        let (rows, cols, d) = (120, 100, 0.5);
+        let g = MapGrid::new(rows, cols, d, d, 0.0, 0.0).unwrap();
+        let amp = 0.3;
+        let map = Array2::from_shape_fn((rows, cols), |(i, _)| {
+            amp * (2.0 * std::f64::consts::PI * 0.25 * i as f64 * d).cos()
+        });
+        let valid = Array2::from_shape_fn((rows, cols), |(i, j)| {
+            let (x, y) = (j as f64 * d - 30.0, i as f64 * d - 20.0);
+            x.hypot(y) > 5.0
+        });
+        let what = BelowBar {
+            kind: "k".into(),
+            key: "k".into(),
+            heldout_z: 6.0,
+            heldout_reduction_fraction: 0.001,
+            params: serde_json::Map::new(),
+            residual_rms_if_added_nm: 1.0,
+            also: Vec::new(),
+            peak_per_mm: 0.0,
+            model_accuracy_nm: 0.5,
+        };
+        let u = below_bar_entry(&g, &map, &valid, what, "a test");
+        let b = u.below_bar.as_ref().unwrap();
+        assert_eq!(u.direction, "y");
+        assert!(
+            (b.peak_per_mm - 0.25).abs() <= 1.0 / 60.0,
+            "{}",
+            b.peak_per_mm
+        );
+        assert!(
+            u.band_per_mm[0] <= 0.25 && 0.25 <= u.band_per_mm[1],
+            "{:?}",
+            u.band_per_mm
+        );
+        assert!(
+            (u.rms_nm / (amp / 2f64.sqrt()) - 1.0).abs() < 0.02,
+            "{}",
+            u.rms_nm
+        );
+        // Smaller than the model's accuracy: said so.
+        assert!(
+            u.description.contains("the model's own error"),
+            "{}",
+            u.description
+        );
+    }
+}
