@@ -693,7 +693,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     // while the model is still the one scored there (the backward check dropped nothing).
     let below = match last_scored {
         Some((scored, n)) if n == effects.len() => {
-            below_bar(p, opts, &effects, &ev, &f, scored, fm.rms())?
+            below_bar(p, opts, &effects, &ev, &f, scored, fm.rms())
         }
         _ => None,
     };
@@ -912,7 +912,7 @@ fn below_bar(
     f: &Fit,
     scored: Vec<Scored>,
     measured_rms_nm: f64,
-) -> Result<Option<Unexplained>, CalibrateError> {
+) -> Option<Unexplained> {
     let mut found: Vec<Scored> = scored
         .into_iter()
         .filter(|(_, s)| s.delta > 0.0 && s.z >= REPORT_Z)
@@ -926,20 +926,28 @@ fn below_bar(
         new
     });
     for (i, (cand, score)) in found.iter().enumerate().take(BELOW_BAR_TRIES) {
-        let mut trial = effects.to_vec();
-        trial.push(if fallback::is_fallback(cand.kind) {
-            (cand.make)(&[], 1.0)
-        } else {
-            let fc = fit(ev, &cand.extra)?;
-            (cand.make)(&fc.coef[ev.cols.len()..], fc.coef[0])
-        });
-        let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
-        let lin = ev_t.linear(&f_t);
-        if f_t.rms() >= f.rms() || trial.iter().any(|e| e.implausible(p, &lin).is_some()) {
+        // A candidate whose refinement fails is passed over: the report is not worth the
+        // calibration.
+        let refined = || -> Result<_, CalibrateError> {
+            let mut trial = effects.to_vec();
+            trial.push(if fallback::is_fallback(cand.kind) {
+                (cand.make)(&[], 1.0)
+            } else {
+                let fc = fit(ev, &cand.extra)?;
+                (cand.make)(&fc.coef[ev.cols.len()..], fc.coef[0])
+            });
+            let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
+            let lin = ev_t.linear(&f_t);
+            if f_t.rms() >= f.rms() || trial.iter().any(|e| e.implausible(p, &lin).is_some()) {
+                return Ok(None);
+            }
+            let all = model_values(&ev_t, &ev_t.names, &f_t.coef);
+            let added = effect_removal(p, &trial, trial.len() - 1, &ev_t, &f_t, &all)?;
+            Ok(Some((trial, ev_t, f_t, lin, added)))
+        };
+        let Ok(Some((trial, ev_t, f_t, lin, added))) = refined() else {
             continue;
-        }
-        let all = model_values(&ev_t, &ev_t.names, &f_t.coef);
-        let added = effect_removal(p, &trial, trial.len() - 1, &ev_t, &f_t, &all)?;
+        };
         let (_, valid) = p.expand(&f_t.resid, &ev_t.w);
         let e = &trial[trial.len() - 1];
         let params: Vec<(String, Param)> = e.params(&lin);
@@ -979,11 +987,11 @@ fn below_bar(
             peak_per_mm: 0.0,
             model_accuracy_nm: MODEL_ACCURACY * measured_rms_nm,
         };
-        return Ok(Some(unexplained::below_bar_entry(
+        return Some(unexplained::below_bar_entry(
             &p.grid, &added, &valid, what, &summary,
-        )));
+        ));
     }
-    Ok(None)
+    None
 }
 
 /// Accuracy of the forward model relative to the measured removal RMS (issue 14's truth suite:
