@@ -13,6 +13,7 @@ use serde::Serialize;
 use crate::band::{BandResidual, ProcessBand};
 use crate::grid::{smooth_masked, MapGrid};
 use bonnetlab_spectrum::psd1d::{psd_x, psd_y, PsdOptions};
+use bonnetlab_surface::stats::height_stats;
 use bonnetlab_surface::Surface;
 
 pub const EXCESS: f64 = 3.0;
@@ -66,22 +67,13 @@ pub fn below_bar_entry(
     mut what: BelowBar,
     summary: &str,
 ) -> Unexplained {
-    let (mut s, mut n) = (0.0f64, 0.0f64);
-    for (v, ok) in map.iter().zip(valid) {
-        if *ok {
-            s += v;
-            n += 1.0;
-        }
-    }
-    let mean = s / n.max(1.0);
-    let ss: f64 = map
-        .iter()
-        .zip(valid)
-        .filter(|(_, ok)| **ok)
-        .map(|(v, _)| (v - mean) * (v - mean))
-        .sum();
-    let rms = (ss / n.max(1.0)).sqrt();
-    let (direction, band, peak) = power_band(g, map, valid);
+    // The project's one masked surface: its Sq (about the valid pixels' mean) and its PSDs.
+    let surf = Surface::with_mask(map.clone(), valid.clone(), Some(g.dx_mm), Some(g.dy_mm)).ok();
+    let rms = surf
+        .as_ref()
+        .and_then(|sf| height_stats(sf).ok())
+        .map_or(0.0, |h| h.rms_nm);
+    let (direction, band, peak) = power_band(g, surf.as_ref());
     what.peak_per_mm = peak;
     let (bbox, share) = region(g, map, valid, band[1].max(1e-3));
     let caveat = if rms < what.model_accuracy_nm {
@@ -130,21 +122,16 @@ pub fn below_bar_entry(
     }
 }
 
-/// The direction ("x" or "y") whose one-sided 1-D PSD of `map` holds more power, the band
+/// The direction ("x" or "y") whose one-sided 1-D PSD of `surf` holds more power, the band
 /// (cycles/mm) from 10 % to 90 % of that PSD's cumulative power, and the PSD's peak (cycles/mm).
-fn power_band(
-    g: &MapGrid,
-    map: &Array2<f64>,
-    valid: &Array2<bool>,
-) -> (&'static str, [f64; 2], f64) {
+fn power_band(g: &MapGrid, surf: Option<&Surface>) -> (&'static str, [f64; 2], f64) {
     let nyq = 0.5 / g.dx_mm.max(g.dy_mm);
-    let Ok(surf) = Surface::with_mask(map.clone(), valid.clone(), Some(g.dx_mm), Some(g.dy_mm))
-    else {
+    let Some(surf) = surf else {
         return ("both", [0.0, nyq], 0.0);
     };
     let opts = PsdOptions::default();
     let mut best: Option<(&'static str, f64, Vec<f64>, Vec<f64>)> = None;
-    for (dir, psd) in [("x", psd_x(&surf, &opts)), ("y", psd_y(&surf, &opts))] {
+    for (dir, psd) in [("x", psd_x(surf, &opts)), ("y", psd_y(surf, &opts))] {
         let Ok(p) = psd else { continue };
         let total: f64 = p.psd_nm2_mm.iter().sum();
         if best.as_ref().is_none_or(|b| total > b.1) {
