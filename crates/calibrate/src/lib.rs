@@ -11,6 +11,7 @@ pub mod tif;
 pub use error::CalibrateError;
 pub mod band;
 pub mod effects;
+pub mod fill_error;
 pub mod lsq;
 pub mod model;
 pub mod noise;

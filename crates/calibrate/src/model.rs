@@ -92,6 +92,13 @@ pub trait Effect: Send + Sync {
     fn rate_terms(&self, _p: &Problem) -> Vec<(String, Vec<f64>)> {
         Vec::new()
     }
+    /// Where a rate term rests on values the maps do not measure (a height under the tool
+    /// where the before map has no data): `draws` plausible errors of the term per sub-step,
+    /// by rate-term name (see [`crate::fill_error`]). The uncertainties add the spread they
+    /// cause. None by default.
+    fn term_errors(&self, _p: &Problem, _draws: usize) -> Vec<(String, Vec<Vec<f64>>)> {
+        Vec::new()
+    }
     /// Reported parameters, from the fitted linear coefficients.
     fn params(&self, lin: &Linear) -> Vec<(String, Param)>;
     /// Why this fitted state cannot be physical (a wiggle larger than the spot, a period the
@@ -145,9 +152,9 @@ impl Linear {
     }
 }
 
-/// The before map's heights (nm) with piston and tilt removed (least squares over the valid
-/// pixels): what the height covariates are taken from.
-pub fn plane_removed(g: &MapGrid, heights: &Array2<f64>, valid: &Array2<bool>) -> Array2<f64> {
+/// Least-squares plane of `heights` over the valid pixels: piston and the x and y slopes
+/// (nm, nm/mm) about the map centre, `z = p0 + p1 (x - cx) + p2 (y - cy)`.
+pub fn plane_fit(g: &MapGrid, heights: &Array2<f64>, valid: &Array2<bool>) -> [f64; 3] {
     let (cx, cy) = g.centre_mm();
     let mut acc = [0.0f64; 6];
     for ((i, j), &v) in valid.indexed_iter() {
@@ -161,14 +168,80 @@ pub fn plane_removed(g: &MapGrid, heights: &Array2<f64>, valid: &Array2<bool>) -
             acc[5] += 1.0;
         }
     }
-    let (pz, px, py) = (
+    [
         acc[0] / acc[5].max(1.0),
         acc[1] / acc[3].max(1e-12),
         acc[2] / acc[4].max(1e-12),
-    );
+    ]
+}
+
+/// The before map's heights (nm) with piston and tilt removed (least squares over the valid
+/// pixels, [`plane_fit`]): what the height covariates are taken from.
+pub fn plane_removed(g: &MapGrid, heights: &Array2<f64>, valid: &Array2<bool>) -> Array2<f64> {
+    let (cx, cy) = g.centre_mm();
+    let [pz, px, py] = plane_fit(g, heights, valid);
     Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
         heights[(i, j)] - pz - px * (g.x_mm(j) - cx) - py * (g.y_mm(i) - cy)
     })
+}
+
+/// The local height of `heights` at the positions (`xs`, `ys`) mm: piston and tilt removed
+/// over the valid pixels ([`plane_removed`]), Gaussian-smoothed over `sigma_mm` within the
+/// valid pixels ([`smooth_masked`]; invalid ones take their valid neighbours' weighted mean,
+/// 0 with none within 4 sigma), sampled bilinearly with positions clamped to the map (off the
+/// map, the border's value). The covariate of [`Problem::local_height`]; at a sigma of 2 px the
+/// `height` covariate.
+pub fn local_height_at(
+    g: &MapGrid,
+    heights: &Array2<f64>,
+    valid: &Array2<bool>,
+    xs: &[f64],
+    ys: &[f64],
+    sigma_mm: f64,
+) -> Vec<f64> {
+    let flat = plane_removed(g, heights, valid);
+    let px = sigma_mm / (0.5 * (g.dx_mm + g.dy_mm));
+    // A length of many pixels is smoothed on d x d block means (at least 4 block pixels
+    // per sigma): the smoothed field is then interpolated between block centres to well
+    // below its own variation, and an 800^2 map at a 16 mm sigma is not a 1025-tap pass
+    // per pixel (2.4 s for the three candidates' lengths, against 0.3 s for all the
+    // other covariates).
+    let d = ((px / 4.0).floor() as usize).max(1);
+    let (rc, cc) = (g.rows.div_ceil(d), g.cols.div_ceil(d));
+    let mut num = Array2::<f64>::zeros((rc, cc));
+    let mut den = Array2::<f64>::zeros((rc, cc));
+    for ((i, j), &v) in valid.indexed_iter() {
+        if v {
+            num[(i / d, j / d)] += flat[(i, j)];
+            den[(i / d, j / d)] += 1.0;
+        }
+    }
+    let valid_c = den.mapv(|w| w > 0.0);
+    let mean_c = Array2::from_shape_fn((rc, cc), |ij| {
+        if den[ij] > 0.0 {
+            num[ij] / den[ij]
+        } else {
+            0.0
+        }
+    });
+    let half = 0.5 * (d as f64 - 1.0);
+    let gc = MapGrid::new(
+        rc,
+        cc,
+        g.dx_mm * d as f64,
+        g.dy_mm * d as f64,
+        g.x0_mm + half * g.dx_mm,
+        g.y0_mm + half * g.dy_mm,
+    );
+    let sm = smooth_masked(&mean_c, &valid_c, (px / d as f64).max(0.5));
+    match gc {
+        Ok(gc) => xs
+            .iter()
+            .zip(ys)
+            .map(|(&x, &y)| sample(&gc, &sm, x, y))
+            .collect(),
+        Err(_) => vec![0.0; xs.len()],
+    }
 }
 
 /// Per-sub-step covariates of the commanded path.
@@ -619,49 +692,15 @@ impl Problem {
                 return v.clone();
             }
         }
-        let g = &self.grid;
-        let flat = plane_removed(g, &self.before, &self.before_valid);
-        let px = sigma_mm / (0.5 * (g.dx_mm + g.dy_mm));
-        // A length of many pixels is smoothed on d x d block means (at least 4 block pixels
-        // per sigma): the smoothed field is then interpolated between block centres to well
-        // below its own variation, and an 800^2 map at a 16 mm sigma is not a 1025-tap pass
-        // per pixel (2.4 s for the three candidates' lengths, against 0.3 s for all the
-        // other covariates).
-        let d = ((px / 4.0).floor() as usize).max(1);
-        let (rc, cc) = (g.rows.div_ceil(d), g.cols.div_ceil(d));
-        let mut num = Array2::<f64>::zeros((rc, cc));
-        let mut den = Array2::<f64>::zeros((rc, cc));
-        for ((i, j), &v) in self.before_valid.indexed_iter() {
-            if v {
-                num[(i / d, j / d)] += flat[(i, j)];
-                den[(i / d, j / d)] += 1.0;
-            }
-        }
-        let valid_c = den.mapv(|w| w > 0.0);
-        let mean_c = Array2::from_shape_fn((rc, cc), |ij| {
-            if den[ij] > 0.0 {
-                num[ij] / den[ij]
-            } else {
-                0.0
-            }
-        });
-        let half = 0.5 * (d as f64 - 1.0);
-        let gc = MapGrid::new(
-            rc,
-            cc,
-            g.dx_mm * d as f64,
-            g.dy_mm * d as f64,
-            g.x0_mm + half * g.dx_mm,
-            g.y0_mm + half * g.dy_mm,
-        );
-        let sm = smooth_masked(&mean_c, &valid_c, (px / d as f64).max(0.5));
         let s = &self.samples;
-        let v: Arc<Vec<f64>> = Arc::new(match gc {
-            Ok(gc) => (0..s.len())
-                .map(|k| sample(&gc, &sm, s.x_mm[k], s.y_mm[k]))
-                .collect(),
-            Err(_) => vec![0.0; s.len()],
-        });
+        let v = Arc::new(local_height_at(
+            &self.grid,
+            &self.before,
+            &self.before_valid,
+            &s.x_mm,
+            &s.y_mm,
+            sigma_mm,
+        ));
         if let Ok(mut c) = self.local_heights.lock() {
             if c.len() >= 8 {
                 c.remove(0);

@@ -96,6 +96,7 @@ pub fn uncertainties_and_correlations(
             g[j] = (v - b) / h;
         }
     }
+    let fill = fill_variances(p, effects, ev, f, &all, &cov, &grads)?;
     let m = grads.len();
     let mut pc = vec![vec![0.0; m]; m];
     for i in 0..m {
@@ -126,7 +127,8 @@ pub fn uncertainties_and_correlations(
         .collect();
     let sig = grads
         .iter()
-        .map(|g| {
+        .zip(&fill)
+        .map(|(g, fill)| {
             let quad = |c: &[Vec<f64>]| {
                 let mut s = 0.0;
                 for a in 0..n {
@@ -144,10 +146,74 @@ pub fn uncertainties_and_correlations(
                 .enumerate()
                 .map(|(k, w)| (g[nlin + k] * w).powi(2) / 12.0)
                 .sum();
-            (classical.max(clustered).max(0.0) + flat).sqrt()
+            (classical.max(clustered).max(0.0) + flat + fill).sqrt()
         })
         .collect();
     Ok((sig, corr))
+}
+
+/// The variance each reported parameter takes from rate terms resting on values the maps do
+/// not measure ([`Effect::term_errors`], [`crate::fill_error`]): for every draw `e` of a term's
+/// error, the data hold `b R(g + e)` where the model has `b R(g)`, so the fitted vector moves
+/// by `(J^T J)^-1 J^T (b R(e))` (linearised, `b` the term's fitted coefficient, `R(e)`
+/// un-centred) and the reported parameters by the delta method's gradients; the mean square of
+/// those moves over the draws. Zero for every parameter when no effect has such a term.
+fn fill_variances(
+    p: &Problem,
+    effects: &[Box<dyn Effect>],
+    ev: &Eval,
+    f: &Fit,
+    cols: &[&[f64]],
+    cov: &[Vec<f64>],
+    grads: &[Vec<f64>],
+) -> Result<Vec<f64>, CalibrateError> {
+    use bonnetlab_process::removal::Fidelity;
+    use rayon::prelude::*;
+    let mut out = vec![0.0; grads.len()];
+    let n = cols.len();
+    for e in effects {
+        for (name, draws) in e.term_errors(p, crate::fill_error::DRAWS) {
+            let Some(j) = ev.names.iter().position(|c| *c == name) else {
+                continue;
+            };
+            if draws.is_empty() {
+                continue;
+            }
+            let b = f.coef[j];
+            let moves: Vec<Vec<f64>> = draws
+                .par_iter()
+                .map(|err| {
+                    let (c, mean) =
+                        p.rate_term_column(Fidelity::Full, &ev.kernels, &ev.exec, err)?;
+                    // `R(e)` un-centred on the analysis pixels, weighted as the joint columns.
+                    let y: Vec<f64> = c
+                        .iter()
+                        .zip(&ev.cols[0])
+                        .zip(&ev.w)
+                        .map(|((c, one), w)| b * (c + mean * one) * w)
+                        .collect();
+                    let jty: Vec<f64> = cols
+                        .iter()
+                        .map(|col| col.iter().zip(&y).map(|(a, b)| a * b).sum())
+                        .collect();
+                    let dtheta: Vec<f64> = (0..n)
+                        .map(|a| (0..n).map(|k| cov[a][k] * jty[k]).sum())
+                        .collect();
+                    Ok(grads
+                        .iter()
+                        .map(|g| g.iter().zip(&dtheta).map(|(a, b)| a * b).sum())
+                        .collect())
+                })
+                .collect::<Result<_, CalibrateError>>()?;
+            let k = moves.len() as f64;
+            for mv in &moves {
+                for (o, d) in out.iter_mut().zip(mv) {
+                    *o += d * d / k;
+                }
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// The columns of the joint fit at `ev`: the linear columns (weighted) first, then the

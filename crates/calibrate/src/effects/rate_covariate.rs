@@ -83,6 +83,17 @@ impl Effect for RateCovariate {
         }
         terms
     }
+    fn term_errors(&self, p: &Problem, draws: usize) -> Vec<(String, Vec<Vec<f64>>)> {
+        if self.covariate != "height" {
+            return Vec::new();
+        }
+        // The `height` covariate is the local height at a 2 px smoothing (`model::covariates`).
+        let sigma_mm = 2.0 * 0.5 * (p.grid.dx_mm + p.grid.dy_mm);
+        vec![(
+            self.col(),
+            crate::fill_error::height_fill_errors(p, sigma_mm, draws),
+        )]
+    }
     fn params(&self, lin: &Linear) -> Vec<(String, Param)> {
         vec![
             ("covariate".into(), Param::Text(self.covariate.into())),
@@ -183,6 +194,12 @@ impl Effect for LocalHeight {
             terms.push((format!("lin:{}:ref_{c}", self.col()), v));
         }
         terms
+    }
+    fn term_errors(&self, p: &Problem, draws: usize) -> Vec<(String, Vec<Vec<f64>>)> {
+        vec![(
+            self.col(),
+            crate::fill_error::height_fill_errors(p, self.smooth_mm, draws),
+        )]
     }
     fn implausible(&self, p: &Problem, _lin: &Linear) -> Option<String> {
         let pix = p.grid.dx_mm.max(p.grid.dy_mm);

@@ -51,8 +51,8 @@ impl TruthSurface {
 }
 
 /// Spatial frequencies (cycles/mm) of spectrum element (k0 row index, k1 column index) of an
-/// `n0 x n1` transform with pixel `d` mm.
-fn freq(k0: usize, k1: usize, n0: usize, n1: usize, d: f64) -> (f64, f64) {
+/// `n0 x n1` transform ([`Fft2`]'s half spectrum) with pixel `d` mm.
+pub(crate) fn freq(k0: usize, k1: usize, n0: usize, n1: usize, d: f64) -> (f64, f64) {
     let s0 = if k0 <= n0 / 2 {
         k0 as f64
     } else {

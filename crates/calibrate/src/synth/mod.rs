@@ -391,6 +391,13 @@ pub struct SynthRun {
     pub true_removal_nm: Array2<f64>,
     /// White-noise floor of before - after (nm).
     pub true_noise_floor_nm: f64,
+    /// The true initial surface's plane over the before map's valid pixels less its plane
+    /// over the whole map grid (the one the `height` and `slope` covariates are taken about),
+    /// as `(p0, a, b)`: `p0 + a x + b y` nm at (x, y) mm. Zero on a part measured whole. A
+    /// rate `1 + c (h - P_grid)` is `(1 + c A) + c (h - P_valid)` with `A` this plane, so a
+    /// calibration that takes the height about the measured pixels' plane finds the
+    /// coefficient `c / (1 + c A)` with `A` at its reference point.
+    pub valid_plane_offset_nm: (f64, f64, f64),
 }
 
 impl SynthRun {
@@ -453,8 +460,11 @@ fn periodic_extend(a: &Array2<f64>, offset: usize, rows: usize, cols: usize) -> 
     Array2::from_shape_fn((rows, cols), |(i, j)| a[(wrap(i, n0), wrap(j, n1))])
 }
 
-/// Least-squares plane (piston, x slope, y slope) of the truth over the map grid.
-fn plane_fit(f: &TruthSurface, g: &Grid) -> (f64, f64, f64) {
+/// Least-squares plane of the truth over the map grid's pixels (all of them, or those `valid`
+/// marks), as `z = p0 + a x + b y` (nm, nm/mm; x, y in mm): `(p0, a, b)`. The slopes are the
+/// moments about the grid's centre over the pixels taken (the calibration's
+/// `model::plane_fit`, exact for a mask symmetric about the centre).
+fn plane_fit(f: &TruthSurface, g: &Grid, valid: Option<&Array2<bool>>) -> (f64, f64, f64) {
     let (cx, cy) = (
         0.5 * (g.x_mm(0) + g.x_mm(g.cols - 1)),
         0.5 * (g.y_mm(0) + g.y_mm(g.rows - 1)),
@@ -462,6 +472,9 @@ fn plane_fit(f: &TruthSurface, g: &Grid) -> (f64, f64, f64) {
     let (mut sz, mut sxz, mut syz, mut sxx, mut syy, mut n) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for i in 0..g.rows {
         for j in 0..g.cols {
+            if valid.is_some_and(|v| !v[(i, j)]) {
+                continue;
+            }
             let (x, y) = (g.x_mm(j) - cx, g.y_mm(i) - cy);
             let z = f.value(g.x_mm(j), g.y_mm(i));
             sz += z;
@@ -819,7 +832,7 @@ pub fn generate_with(
         heights_nm: extend(&canonical),
         grid: tg,
     };
-    let plane = plane_fit(&truth, &grid);
+    let plane = plane_fit(&truth, &grid, None);
 
     // Dwell map on a 1 mm grid over the raster: more dwell (slower) where the low-passed
     // surface is high.
@@ -1038,6 +1051,11 @@ pub fn generate_with(
             }
         }
     }
+    let valid_plane = if vb.iter().all(|v| *v) {
+        plane
+    } else {
+        plane_fit(&truth, &grid, Some(&vb))
+    };
     let mk = |h: Array2<f64>, v: Array2<bool>, name: &str| -> Result<Surface, CalibrateError> {
         let mut s = Surface::with_mask(h, v, Some(d), Some(d))?;
         s.provenance.format = "synthetic".into();
@@ -1090,6 +1108,11 @@ pub fn generate_with(
         pitch_mm: cfg.pitch_mm,
         true_removal_nm,
         true_noise_floor_nm: cfg.true_noise_floor_nm(),
+        valid_plane_offset_nm: (
+            valid_plane.0 - plane.0,
+            valid_plane.1 - plane.1,
+            valid_plane.2 - plane.2,
+        ),
     })
 }
 
