@@ -1,7 +1,10 @@
 //! One-sigma uncertainties of the accepted effects' reported parameters: the fitted vector's
 //! covariance (classical and cluster-robust over the hold-out blocks, the larger kept per
 //! parameter) propagated to the reported parameters by finite differences (delta method).
-//! Statistical only: a systematic model error (an effect the library does not have) is not in it.
+//! Statistical, with one systematic term: where an accepted rate term rests on values the maps
+//! do not measure (a height covariate under the tool off the measured pixels), the spread its
+//! plausible values give (`fill_variances`, [`crate::fill_error`]). Another systematic model
+//! error (an effect the library does not have) is not in it.
 //! The registration's texture bias is removed from the estimate before (see
 //! [`registration_texture_step`]), not added to its interval.
 

@@ -10,7 +10,12 @@
 //! rate-vs-y companion columns (`lin:` columns: fitted, not reported, and not un-centred into
 //! the reference rate, which is therefore the rate at the dwell-weighted mean position). Without
 //! them, a run whose generator removed the plane over a round aperture was explained as height
-//! plus a spurious drift and x dependence (final 0.66 nm against a 0.42 nm floor).
+//! plus a spurious drift and x dependence (final 0.66 nm against a 0.42 nm floor). The
+//! reported coefficient is thus the one about the measured pixels' plane: a rate
+//! `1 + c (h' + A)` with `A` the other plane's offset is `(1 + c A) + c h'`, so `c / (1 + c A)`
+//! against the rate at the reference point. On issue 15's harness (round 90 mm apertures on a
+//! 100 mm part, `A` 10-70 nm) that was most of the height coefficient's error: 5.0 % -> 1.7 %
+//! median on round parts once the truth was stated about the same plane.
 //!
 //! The height over a region ([`LocalHeight`]): the rate follows the height averaged about the
 //! tool (a bonnet's contact pressure answers to the surface under its contact zone, not to one

@@ -1,0 +1,126 @@
+//! A height covariate rests on the height under the tool where the before map has no data (the
+//! corners a round aperture leaves, the overrun past the part): `fill_error` draws what the
+//! model's fill may miss there from surrogate surfaces with the map's own spectrum. Checked
+//! against the true surface of the generator (a square twin of the same run measures the
+//! corners), not against the surrogates' own construction. And the generator's reference
+//! plane: `SynthRun::valid_plane_offset_nm` against the calibration's own plane fit.
+
+use bonnetlab_calibrate::fill_error::height_fill_errors;
+use bonnetlab_calibrate::grid::{sample, smooth_masked};
+use bonnetlab_calibrate::model::plane_fit;
+use bonnetlab_calibrate::synth::{generate, InitialSurface, SynthConfig};
+use ndarray::Array2;
+
+fn round_and_square(seed: u64, noise: f64) -> (SynthConfig, SynthConfig) {
+    let square = SynthConfig::realistic(seed, 160, 100.0, InitialSurface::realistic_texture(2.2))
+        .with_noise_nm(noise, noise);
+    let round = square.clone().with_round_aperture(true, 80.0);
+    (round, square)
+}
+
+#[test]
+fn the_valid_plane_offset_is_the_calibrations_plane_over_the_aperture_less_over_the_map() {
+    let (round, square) = round_and_square(11, 0.0);
+    // Measured whole (no isolated dropouts either): the same plane.
+    let whole = SynthConfig {
+        dropout_fraction: 0.0,
+        ..square
+    };
+    let sq = generate(&whole).expect("square run");
+    assert_eq!(sq.valid_plane_offset_nm, (0.0, 0.0, 0.0));
+    let run = generate(&round).expect("round run");
+    let p = run.problem().expect("problem");
+    let g = &p.grid;
+    // The noise-free square twin's before map is the true surface at every pixel (the round
+    // run's map holds no data outside its aperture).
+    let truth = sq.before.heights_nm();
+    let all = Array2::from_elem(p.before_valid.dim(), true);
+    let over_valid = plane_fit(g, truth, &p.before_valid);
+    let over_all = plane_fit(g, truth, &all);
+    let (cx, cy) = g.centre_mm();
+    let (p0, a, b) = run.valid_plane_offset_nm;
+    let mut largest = 0.0f64;
+    for (x, y) in [(cx, cy), (0.0, 0.0), (100.0, 20.0), (30.0, 90.0)] {
+        let calib = (over_valid[0] - over_all[0])
+            + (over_valid[1] - over_all[1]) * (x - cx)
+            + (over_valid[2] - over_all[2]) * (y - cy);
+        let synth = p0 + a * x + b * y;
+        eprintln!("offset at ({x}, {y}) mm: calibration {calib:.6} nm, generator {synth:.6} nm");
+        assert!((calib - synth).abs() < 1e-6, "{calib} vs {synth}");
+        largest = largest.max(synth.abs());
+    }
+    // A case where the reference matters: tens of nm on this 140 nm surface.
+    assert!(largest > 5.0, "offset {largest} nm");
+}
+
+#[test]
+fn fill_errors_vanish_inside_the_data_and_match_the_true_corners_outside() {
+    // Three power-law surfaces; the truth of the corners from each run's square twin.
+    for seed in [3u64, 8, 21] {
+        let (round, square) = round_and_square(seed, 1.0);
+        let pr = generate(&round).expect("round").problem().expect("problem");
+        let ps = generate(&square)
+            .expect("square")
+            .problem()
+            .expect("problem");
+        let g = &pr.grid;
+        let sigma_mm = 2.0 * g.dx_mm;
+        let draws = height_fill_errors(&pr, sigma_mm, 16);
+        assert_eq!(draws.len(), 16);
+        // The true local height about the same plane the model takes (over the aperture's
+        // pixels), from the square twin's map: the model's smoothing over a map with no holes.
+        let [pz, px, py] = plane_fit(g, &ps.before, &pr.before_valid);
+        let (cx, cy) = g.centre_mm();
+        let flat = Array2::from_shape_fn(ps.before.dim(), |(i, j)| {
+            ps.before[(i, j)] - pz - px * (g.x_mm(j) - cx) - py * (g.y_mm(i) - cy)
+        });
+        let all = Array2::from_elem(flat.dim(), true);
+        let truth = smooth_masked(&flat, &all, sigma_mm / g.dx_mm);
+        let model = pr.local_height(sigma_mm);
+        let s = &pr.samples;
+        let r_ap = 40.0;
+        let dist = |k: usize| (s.x_mm[k] - cx).hypot(s.y_mm[k] - cy) - r_ap;
+        let on_map = |k: usize| {
+            (0.0..=g.x_mm(g.cols - 1)).contains(&s.x_mm[k])
+                && (0.0..=g.y_mm(g.rows - 1)).contains(&s.y_mm[k])
+        };
+        // Corners: on the map, over 3 mm (beyond the fill's reach) outside the aperture.
+        let corners: Vec<usize> = (0..s.len())
+            .filter(|&k| on_map(k) && dist(k) > 3.0)
+            .collect();
+        // Deep inside: the smoothing window (4 sigma) and a pixel clear of the rim.
+        let inside: Vec<usize> = (0..s.len())
+            .filter(|&k| dist(k) < -(4.0 * sigma_mm + 2.0 * g.dx_mm))
+            .collect();
+        assert!(corners.len() > 1000 && inside.len() > 1000);
+        let rms = |f: &dyn Fn(usize) -> f64, set: &[usize]| {
+            (set.iter().map(|&k| f(k).powi(2)).sum::<f64>() / set.len() as f64).sqrt()
+        };
+        let actual = rms(
+            &|k| sample(g, &truth, s.x_mm[k], s.y_mm[k]) - model[k],
+            &corners,
+        );
+        let drawn = |set: &[usize]| {
+            (draws
+                .iter()
+                .map(|d| rms(&|k| d[k], set).powi(2))
+                .sum::<f64>()
+                / draws.len() as f64)
+                .sqrt()
+        };
+        let (corner_draws, inside_draws) = (drawn(&corners), drawn(&inside));
+        eprintln!(
+            "seed {seed}: corners: true fill error {actual:.1} nm RMS, drawn {corner_draws:.1} nm; \
+             inside: drawn {inside_draws:.3} nm"
+        );
+        assert!(
+            corner_draws > actual / 1.5 && corner_draws < 1.5 * actual,
+            "drawn {corner_draws} nm against the true {actual} nm"
+        );
+        // Inside, only the before map's isolated dropouts (0.1 % of the pixels) leave a fill.
+        assert!(
+            inside_draws < 0.03 * corner_draws,
+            "inside {inside_draws} nm"
+        );
+    }
+}
