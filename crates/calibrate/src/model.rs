@@ -800,13 +800,30 @@ impl Problem {
     }
 }
 
+/// Smoothing (Gaussian sigma, map pixels) of the `height` and `slope` covariates.
+pub const HEIGHT_SMOOTH_PX: f64 = 2.0;
+
+/// [`HEIGHT_SMOOTH_PX`] in mm on grid `g` (the local height's length for the `height`
+/// covariate, [`local_height_at`]).
+pub fn height_smooth_mm(g: &MapGrid) -> f64 {
+    HEIGHT_SMOOTH_PX * 0.5 * (g.dx_mm + g.dy_mm)
+}
+
 /// Per-sub-step covariates: time (s from start), x, y (mm), feed (mm/s), height (nm) and slope
 /// (nm/mm) of the before map with piston and tilt removed and lightly smoothed (sigma 2 px, so
 /// measurement noise does not dominate the slope), signed distance to the part edge (mm).
 fn covariates(g: &MapGrid, before: &Surface, s: &Samples) -> Covariates {
     let valid = before.valid();
     let flat = plane_removed(g, before.heights_nm(), valid);
-    let sm = smooth_masked(&flat, valid, 2.0);
+    let sm = smooth_masked(&flat, valid, HEIGHT_SMOOTH_PX);
+    let height = local_height_at(
+        g,
+        before.heights_nm(),
+        valid,
+        &s.x_mm,
+        &s.y_mm,
+        height_smooth_mm(g),
+    );
     let slope = Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
         let jp = (j + 1).min(g.cols - 1);
         let jm = j.saturating_sub(1);
@@ -818,14 +835,12 @@ fn covariates(g: &MapGrid, before: &Surface, s: &Samples) -> Covariates {
     });
     let edge = signed_edge_distance(valid, g.dx_mm, g.dy_mm);
     let n = s.len();
-    let mut height = Vec::with_capacity(n);
     let mut sl = Vec::with_capacity(n);
     let mut ed = Vec::with_capacity(n);
     let (xmin, xmax) = (g.x0_mm, g.x_mm(g.cols - 1));
     let (ymin, ymax) = (g.y0_mm, g.y_mm(g.rows - 1));
     for k in 0..n {
         let (x, y) = (s.x_mm[k], s.y_mm[k]);
-        height.push(sample(g, &sm, x, y));
         sl.push(sample(g, &slope, x, y));
         // Off the map: continue the border value outwards (the part ends at the map edge).
         let beyond = (xmin - x)

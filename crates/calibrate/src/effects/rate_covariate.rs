@@ -93,7 +93,7 @@ impl Effect for RateCovariate {
             return Vec::new();
         }
         // The `height` covariate is the local height at a 2 px smoothing (`model::covariates`).
-        let sigma_mm = 2.0 * 0.5 * (p.grid.dx_mm + p.grid.dy_mm);
+        let sigma_mm = crate::model::height_smooth_mm(&p.grid);
         vec![(
             self.col(),
             crate::fill_error::height_fill_errors(p, sigma_mm, draws),
