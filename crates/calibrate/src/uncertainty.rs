@@ -174,6 +174,11 @@ fn fill_variances(
     use rayon::prelude::*;
     let mut out = vec![0.0; grads.len()];
     let n = cols.len();
+    // `R(1)`: the baseline column (un-centres a rate term's column).
+    let Some(base) = ev.names.iter().position(|c| c == "baseline") else {
+        return Ok(out);
+    };
+    let one = &ev.cols[base];
     for e in effects {
         for (name, draws) in e.term_errors(p, crate::fill_error::DRAWS) {
             let Some(j) = ev.names.iter().position(|c| *c == name) else {
@@ -191,7 +196,7 @@ fn fill_variances(
                     // `R(e)` un-centred on the analysis pixels, weighted as the joint columns.
                     let y: Vec<f64> = c
                         .iter()
-                        .zip(&ev.cols[0])
+                        .zip(one)
                         .zip(&ev.w)
                         .map(|((c, one), w)| b * (c + mean * one) * w)
                         .collect();

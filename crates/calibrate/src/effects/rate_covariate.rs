@@ -14,7 +14,7 @@
 //! reported coefficient is thus the one about the measured pixels' plane: a rate
 //! `1 + c (h' + A)` with `A` the other plane's offset is `(1 + c A) + c h'`, so `c / (1 + c A)`
 //! against the rate at the reference point. On issue 15's harness (round 90 mm apertures on a
-//! 100 mm part, `A` 10-70 nm) that was most of the height coefficient's error: 5.0 % -> 1.7 %
+//! 100 mm part, `A` 10-70 nm) that was most of the height coefficient's error: 4.0 % -> 1.5 %
 //! median on round parts once the truth was stated about the same plane.
 //!
 //! The height over a region ([`LocalHeight`]): the rate follows the height averaged about the
