@@ -185,20 +185,17 @@ pub fn plane_removed(g: &MapGrid, heights: &Array2<f64>, valid: &Array2<bool>) -
     })
 }
 
-/// The local height of `heights` at the positions (`xs`, `ys`) mm: piston and tilt removed
-/// over the valid pixels ([`plane_removed`]), Gaussian-smoothed over `sigma_mm` within the
-/// valid pixels ([`smooth_masked`]; invalid ones take their valid neighbours' weighted mean,
-/// 0 with none within 4 sigma), sampled bilinearly with positions clamped to the map (off the
-/// map, the border's value). The covariate of [`Problem::local_height`]; at a sigma of 2 px the
-/// `height` covariate.
-pub fn local_height_at(
+/// The local height of `heights` as a map: piston and tilt removed over the valid pixels
+/// ([`plane_removed`]), Gaussian-smoothed over `sigma_mm` within the valid pixels
+/// ([`smooth_masked`]; invalid ones take their valid neighbours' weighted mean, 0 with none
+/// within 4 sigma), on the grid it is returned with (`g` itself up to 7 px; coarser blocks
+/// beyond). `None` when that grid cannot be formed.
+pub fn local_height_map(
     g: &MapGrid,
     heights: &Array2<f64>,
     valid: &Array2<bool>,
-    xs: &[f64],
-    ys: &[f64],
     sigma_mm: f64,
-) -> Vec<f64> {
+) -> Option<(MapGrid, Array2<f64>)> {
     let flat = plane_removed(g, heights, valid);
     let px = sigma_mm / (0.5 * (g.dx_mm + g.dy_mm));
     // A length of many pixels is smoothed on d x d block means (at least 4 block pixels
@@ -232,15 +229,33 @@ pub fn local_height_at(
         g.dy_mm * d as f64,
         g.x0_mm + half * g.dx_mm,
         g.y0_mm + half * g.dy_mm,
-    );
-    let sm = smooth_masked(&mean_c, &valid_c, (px / d as f64).max(0.5));
-    match gc {
-        Ok(gc) => xs
+    )
+    .ok()?;
+    Some((
+        gc,
+        smooth_masked(&mean_c, &valid_c, (px / d as f64).max(0.5)),
+    ))
+}
+
+/// [`local_height_map`] sampled at the positions (`xs`, `ys`) mm, bilinearly with positions
+/// clamped to the map (off the map, the border's value); 0 where the map cannot be formed.
+/// The covariate of [`Problem::local_height`]; at [`HEIGHT_SMOOTH_PX`] the `height`
+/// covariate.
+pub fn local_height_at(
+    g: &MapGrid,
+    heights: &Array2<f64>,
+    valid: &Array2<bool>,
+    xs: &[f64],
+    ys: &[f64],
+    sigma_mm: f64,
+) -> Vec<f64> {
+    match local_height_map(g, heights, valid, sigma_mm) {
+        Some((gc, sm)) => xs
             .iter()
             .zip(ys)
             .map(|(&x, &y)| sample(&gc, &sm, x, y))
             .collect(),
-        Err(_) => vec![0.0; xs.len()],
+        None => vec![0.0; xs.len()],
     }
 }
 
@@ -814,16 +829,15 @@ pub fn height_smooth_mm(g: &MapGrid) -> f64 {
 /// measurement noise does not dominate the slope), signed distance to the part edge (mm).
 fn covariates(g: &MapGrid, before: &Surface, s: &Samples) -> Covariates {
     let valid = before.valid();
-    let flat = plane_removed(g, before.heights_nm(), valid);
-    let sm = smooth_masked(&flat, valid, HEIGHT_SMOOTH_PX);
-    let height = local_height_at(
-        g,
-        before.heights_nm(),
-        valid,
-        &s.x_mm,
-        &s.y_mm,
-        height_smooth_mm(g),
-    );
+    // The local height at 2 px: on the map's own grid (no blocks below 8 px).
+    let sm = match local_height_map(g, before.heights_nm(), valid, height_smooth_mm(g)) {
+        Some((_, sm)) => sm,
+        None => smooth_masked(
+            &plane_removed(g, before.heights_nm(), valid),
+            valid,
+            HEIGHT_SMOOTH_PX,
+        ),
+    };
     let slope = Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
         let jp = (j + 1).min(g.cols - 1);
         let jm = j.saturating_sub(1);
@@ -835,12 +849,14 @@ fn covariates(g: &MapGrid, before: &Surface, s: &Samples) -> Covariates {
     });
     let edge = signed_edge_distance(valid, g.dx_mm, g.dy_mm);
     let n = s.len();
+    let mut height = Vec::with_capacity(n);
     let mut sl = Vec::with_capacity(n);
     let mut ed = Vec::with_capacity(n);
     let (xmin, xmax) = (g.x0_mm, g.x_mm(g.cols - 1));
     let (ymin, ymax) = (g.y0_mm, g.y_mm(g.rows - 1));
     for k in 0..n {
         let (x, y) = (s.x_mm[k], s.y_mm[k]);
+        height.push(sample(g, &sm, x, y));
         sl.push(sample(g, &slope, x, y));
         // Off the map: continue the border value outwards (the part ends at the map edge).
         let beyond = (xmin - x)
