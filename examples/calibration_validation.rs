@@ -205,7 +205,8 @@ fn scenario(args: &Args, r: usize, reals: &[PathBuf]) -> SynthConfig {
 /// x and y columns leave). The two planes differ by `A` (`SynthRun::valid_plane_offset_nm`,
 /// from the true surface) on a round aperture, and the same rate is then
 /// `(1 + c A) + c (h - P_valid)`: the coefficient `c / (1 + c A(reference))`. On the harness's
-/// round runs `A` is 10-70 nm, `c A` up to 12 %; on square parts it is 0.
+/// round runs `A` is 10-70 nm, `c A` up to 12 %; on square parts a fraction of a nm (the
+/// before map's isolated dropouts).
 fn height_about_valid_plane(
     truth: &Truth,
     run: &bonnetlab::calibrate::synth::SynthRun,

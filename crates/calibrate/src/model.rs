@@ -188,7 +188,7 @@ pub fn plane_removed(g: &MapGrid, heights: &Array2<f64>, valid: &Array2<bool>) -
 /// The local height of `heights` as a map: piston and tilt removed over the valid pixels
 /// ([`plane_removed`]), Gaussian-smoothed over `sigma_mm` within the valid pixels
 /// ([`smooth_masked`]; invalid ones take their valid neighbours' weighted mean, 0 with none
-/// within 4 sigma), on the grid it is returned with (`g` itself up to 7 px; coarser blocks
+/// within 4 sigma), on the grid it is returned with (`g` itself below 8 px; coarser blocks
 /// beyond). `None` when that grid cannot be formed.
 pub fn local_height_map(
     g: &MapGrid,
