@@ -499,9 +499,11 @@ fn assess(kind: &str, truth: &Truth, cal: &Calibration, true_floor: f64) -> Outc
             let err = (est - v).abs();
             worst = worst.max(err / scale);
             let sig = num(e.uncertainties.get(p));
+            // Six significant digits: a height coefficient (about 2e-3 per nm) keeps its
+            // precision against its sigma.
             o.detail.push_str(&format!(
-                " {p}: est {est:.5} true {v:.5} sigma {}",
-                fmt(sig, 5)
+                " {p}: est {est:.5e} true {v:.5e} sigma {}",
+                sig.map_or("-".into(), |s| format!("{s:.5e}"))
             ));
             if let Some(s) = sig {
                 o.with_sigma += 1;
