@@ -21,12 +21,12 @@
 //! mean square of the parameter shifts.
 
 use bonnetlab_process::fft::Fft2;
+use bonnetlab_process::interp::bilinear_periodic;
 use bonnetlab_surface::rng::Rng;
 use ndarray::Array2;
 use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 
-use crate::grid::MapGrid;
 use crate::model::{local_height_at, plane_fit, plane_removed, Problem};
 
 /// Draws of the fill error per covariate (the systematic variance is their mean square: with
@@ -113,8 +113,9 @@ pub fn height_fill_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec<Vec<f
                 .zip(ys)
                 .zip(&fill)
                 .map(|((&x, &y), q)| {
+                    let (u, v) = g.frac_index(x, y);
                     let truth =
-                        sample_periodic(g, &surf_sm, x, y) - pz - px * (x - cx) - py * (y - cy);
+                        bilinear_periodic(&surf_sm, u, v) - pz - px * (x - cx) - py * (y - cy);
                     truth - q
                 })
                 .collect()
@@ -124,34 +125,4 @@ pub fn height_fill_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec<Vec<f
         return Vec::new();
     }
     out
-}
-
-/// Bilinear sample of a map that repeats with the grid's extent, at (x, y) mm.
-fn sample_periodic(g: &MapGrid, a: &Array2<f64>, x: f64, y: f64) -> f64 {
-    let (rows, cols) = a.dim();
-    let (v, u) = g.frac_index(x, y);
-    let (j0, i0) = (u.floor(), v.floor());
-    let (fu, fv) = (u - j0, v - i0);
-    let wrap = |k: f64, n: usize| (k as i64).rem_euclid(n as i64) as usize;
-    let (ja, jb) = (wrap(j0, cols), wrap(j0 + 1.0, cols));
-    let (ia, ib) = (wrap(i0, rows), wrap(i0 + 1.0, rows));
-    (1.0 - fv) * ((1.0 - fu) * a[(ia, ja)] + fu * a[(ia, jb)])
-        + fv * ((1.0 - fu) * a[(ib, ja)] + fu * a[(ib, jb)])
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_periodic_sample_wraps_and_interpolates() {
-        let g = MapGrid::new(4, 5, 1.0, 2.0, 0.0, 0.0).unwrap();
-        let a = Array2::from_shape_fn((4, 5), |(i, j)| (10 * i + j) as f64);
-        // Inside: bilinear in both directions.
-        assert!((sample_periodic(&g, &a, 1.5, 2.0) - 11.5).abs() < 1e-12);
-        // One period to the left and down is the same point.
-        assert!((sample_periodic(&g, &a, 1.5 - 5.0, 2.0 - 8.0) - 11.5).abs() < 1e-12);
-        // Past the last column it wraps to the first: between 4 and 0 on row 0.
-        assert!((sample_periodic(&g, &a, 4.5, 0.0) - 2.0).abs() < 1e-12);
-    }
 }

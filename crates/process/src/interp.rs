@@ -25,6 +25,23 @@ pub fn bilinear(a: &Array2<f64>, u: f64, v: f64) -> f64 {
         + fu * ((1.0 - fv) * at(i + 1, j) + fv * at(i + 1, j + 1))
 }
 
+/// Bilinear interpolation of `a` at fractional (row u, col v) of a map that repeats with the
+/// array's extent (a periodic field, such as one made by an inverse FFT); 0 for a non-finite
+/// position or an empty array.
+pub fn bilinear_periodic(a: &Array2<f64>, u: f64, v: f64) -> f64 {
+    let (r, c) = a.dim();
+    if r == 0 || c == 0 || !(u.is_finite() && v.is_finite()) {
+        return 0.0;
+    }
+    let (i0, j0) = (u.floor(), v.floor());
+    let (fu, fv) = (u - i0, v - j0);
+    let wrap = |k: f64, n: usize| (k as i64).rem_euclid(n as i64) as usize;
+    let (ia, ib) = (wrap(i0, r), wrap(i0 + 1.0, r));
+    let (ja, jb) = (wrap(j0, c), wrap(j0 + 1.0, c));
+    (1.0 - fu) * ((1.0 - fv) * a[(ia, ja)] + fv * a[(ia, jb)])
+        + fu * ((1.0 - fv) * a[(ib, ja)] + fv * a[(ib, jb)])
+}
+
 /// Bilinear interpolation of `a` at fractional (row u, col v) with the position clamped to the
 /// array (a hole-free map sampled at the part edge takes its border values, never 0).
 pub fn bilinear_clamped(a: &Array2<f64>, u: f64, v: f64) -> f64 {
@@ -214,6 +231,19 @@ pub fn fourier_upsample(a: &Array2<f64>, factor: usize) -> Array2<f64> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_periodic_sample_wraps_and_interpolates() {
+        let a = ndarray::Array2::from_shape_fn((4, 5), |(i, j)| (10 * i + j) as f64);
+        // Inside: bilinear in both directions (row 1, column 1.5).
+        assert!((super::bilinear_periodic(&a, 1.0, 1.5) - 11.5).abs() < 1e-12);
+        // One period up and to the left is the same point.
+        assert!((super::bilinear_periodic(&a, 1.0 - 4.0, 1.5 - 5.0) - 11.5).abs() < 1e-12);
+        // Past the last column it wraps to the first: half way between 4 and 0 on row 0.
+        assert!((super::bilinear_periodic(&a, 0.0, 4.5) - 2.0).abs() < 1e-12);
+        // And past the last row, to the first: half way between 30 and 0 in column 0.
+        assert!((super::bilinear_periodic(&a, 3.5, 0.0) - 15.0).abs() < 1e-12);
+    }
+
     use super::*;
 
     #[test]
