@@ -1,5 +1,8 @@
 //! The commanded tool path (time-stamped tool-centre positions) as the calibration resolves it:
-//! the samples of the path densified by the process crate ([`PathLog::densified`]: straight
+//! the samples of the path with the corners its sampling cut restored
+//! ([`PathLog::with_corners`]: a raster's turns into and out of its pitch steps, which a 10 Hz
+//! log's chords cut by up to a few tenths of a mm, moving the slow dwell at the turnarounds),
+//! densified by the process crate ([`PathLog::densified`]: straight
 //! lines at constant speed, pieces no longer than a given step), each carrying its share of the
 //! dwell and the along-path covariates the effects use. Per-sample rate weights and position
 //! perturbations act on these samples; the forward model interpolates them linearly between
@@ -66,10 +69,10 @@ impl Samples {
 }
 
 impl Samples {
-    /// The samples of `path` densified to pieces of at most `max_step_mm`, and that densified
-    /// path (the commanded motion, unchanged).
+    /// The samples of `path` with its cut corners restored and densified to pieces of at most
+    /// `max_step_mm`, and that path (the commanded motion as read).
     pub fn of(path: &PathLog, max_step_mm: f64) -> (Samples, PathLog) {
-        let d = path.densified(max_step_mm.max(1e-6));
+        let d = path.with_corners().densified(max_step_mm.max(1e-6));
         let n = d.len();
         let mut s = Samples {
             t0_s: d.t_s.first().copied().unwrap_or(0.0),

@@ -116,6 +116,62 @@ impl PathLog {
         out
     }
 
+    /// The path with the corners its samples cut restored: where the chords on either side of
+    /// a chord turn by more than [`CORNER_TURN_DEG`], the tool turned a corner inside it (a
+    /// raster's turn into and out of its pitch step, sampled at a fixed rate). The vertex goes
+    /// where the lines through those two chords meet, if it lies ahead of the chord's start and
+    /// behind its end, each within twice the chord's length; the chord's time is split over the
+    /// two legs in proportion to each leg's length over its neighbouring chord's speed. Samples
+    /// on a corner, smooth curves (turns under the threshold over two chords) and chords next
+    /// to a standstill are left as they are.
+    pub fn with_corners(&self) -> PathLog {
+        let n = self.len();
+        let mut out = PathLog::default();
+        let chord = |a: usize| {
+            (
+                self.x_mm[a + 1] - self.x_mm[a],
+                self.y_mm[a + 1] - self.y_mm[a],
+                self.t_s[a + 1] - self.t_s[a],
+            )
+        };
+        let cos_turn = CORNER_TURN_DEG.to_radians().cos();
+        for k in 0..n {
+            out.t_s.push(self.t_s[k]);
+            out.x_mm.push(self.x_mm[k]);
+            out.y_mm.push(self.y_mm[k]);
+            if k == 0 || k + 2 >= n {
+                continue;
+            }
+            let (ax, ay, at) = chord(k - 1);
+            let (bx, by, bt) = chord(k);
+            let (cx, cy, ct) = chord(k + 1);
+            let (la, lb, lc) = (ax.hypot(ay), bx.hypot(by), cx.hypot(cy));
+            let tiny = 1e-9 * (la + lb + lc).max(f64::MIN_POSITIVE);
+            if la <= tiny || lb <= tiny || lc <= tiny {
+                continue;
+            }
+            let (ux, uy, wx, wy) = (ax / la, ay / la, cx / lc, cy / lc);
+            if ux * wx + uy * wy > cos_turn {
+                continue;
+            }
+            // Vertex v = s_k + u a_hat = s_(k+1) - w c_hat.
+            let det = ux * wy - uy * wx;
+            if det.abs() < 1e-9 {
+                continue;
+            }
+            let u = (bx * wy - by * wx) / det;
+            let w = (ux * by - uy * bx) / det;
+            if !(u > 1e-6 * lb && w > 1e-6 * lb && u < 2.0 * lb && w < 2.0 * lb) {
+                continue;
+            }
+            let (t1, t2) = (u * at / la, w * ct / lc);
+            out.t_s.push(self.t_s[k] + bt * t1 / (t1 + t2));
+            out.x_mm.push(self.x_mm[k] + u * ux);
+            out.y_mm.push(self.y_mm[k] + u * uy);
+        }
+        out
+    }
+
     /// Sub-steps of the path: for every segment, `m` equal pieces no longer than `max_step_mm`
     /// (and no longer than `max_dt_s` in time), each given as (midpoint x, y, duration, segment
     /// index, fraction along the segment at the midpoint). Calls `f` for each.
@@ -138,6 +194,10 @@ impl PathLog {
         }
     }
 }
+
+/// Smallest turn between the chords on either side of a chord that [`PathLog::with_corners`]
+/// reads as a corner inside it (degrees).
+pub const CORNER_TURN_DEG: f64 = 30.0;
 
 /// Number of equal sub-steps of a segment (at least 1, bounded so a corrupt log cannot ask for
 /// an absurd allocation of time).
@@ -178,6 +238,73 @@ mod tests {
         assert!((p.length_mm() - 1.5).abs() < 1e-12);
         assert_eq!(p.position_at(2.5), Some((1.0, 0.25)));
         assert!(PathLog::new(vec![0.0, 0.0], vec![0.0; 2], vec![0.0; 2]).is_err());
+    }
+
+    /// A raster turn (along +x at 2 mm/s, a 2 mm pitch step in +y at 8 mm/s, back along -x
+    /// at 2 mm/s), sampled every 0.1 s from an offset so that no sample falls on a corner.
+    fn raster_turn(t: f64) -> (f64, f64) {
+        let (t1, t2) = (5.0, 5.25);
+        if t <= t1 {
+            (2.0 * t, 0.0)
+        } else if t <= t2 {
+            (10.0, 8.0 * (t - t1))
+        } else {
+            (10.0 - 2.0 * (t - t2), 2.0)
+        }
+    }
+
+    #[test]
+    fn corners_cut_by_the_samples_are_restored() {
+        let ts: Vec<f64> = (0..100).map(|k| 0.037 + 0.1 * k as f64).collect();
+        let (xs, ys): (Vec<f64>, Vec<f64>) = ts.iter().map(|&t| raster_turn(t)).unzip();
+        let p = PathLog::new(ts.clone(), xs, ys).unwrap();
+        let c = p.with_corners();
+        assert_eq!(c.len(), p.len() + 2);
+        assert!(PathLog::new(c.t_s.clone(), c.x_mm.clone(), c.y_mm.clone()).is_ok());
+        // The two vertices, where the motion turned, at the times it turned.
+        for (tv, xv, yv) in [(5.0, 10.0, 0.0), (5.25, 10.0, 2.0)] {
+            let k = c
+                .x_mm
+                .iter()
+                .zip(&c.y_mm)
+                .position(|(x, y)| (x - xv).abs() < 1e-9 && (y - yv).abs() < 1e-9)
+                .expect("vertex restored");
+            assert!((c.t_s[k] - tv).abs() < 1e-9, "{} against {tv}", c.t_s[k]);
+        }
+        // The restored path is the motion itself (straight legs at constant speed).
+        for k in 0..400 {
+            let t = 0.04 + 0.0245 * k as f64;
+            let (a, b) = (c.position_at(t).unwrap(), raster_turn(t));
+            assert!((a.0 - b.0).abs() < 1e-9 && (a.1 - b.1).abs() < 1e-9, "{t}");
+        }
+        // The chord reading cuts the corners by up to 0.3 mm.
+        let cut = (0..400)
+            .map(|k| 0.04 + 0.0245 * k as f64)
+            .map(|t| {
+                let (a, b) = (p.position_at(t).unwrap(), raster_turn(t));
+                (a.0 - b.0).hypot(a.1 - b.1)
+            })
+            .fold(0.0, f64::max);
+        assert!(cut > 0.1, "{cut}");
+    }
+
+    #[test]
+    fn smooth_curves_and_sampled_corners_are_left_alone() {
+        // A circle sampled every 10 degrees: 20 degrees over two chords.
+        let n = 40;
+        let a = |k: usize| k as f64 * 10f64.to_radians();
+        let p = PathLog::new(
+            (0..n).map(|k| k as f64).collect(),
+            (0..n).map(|k| 5.0 * a(k).cos()).collect(),
+            (0..n).map(|k| 5.0 * a(k).sin()).collect(),
+        )
+        .unwrap();
+        assert_eq!(p.with_corners(), p);
+        // A raster turn sampled on its corners.
+        let ts: Vec<f64> = (0..80).map(|k| 0.125 * k as f64).collect();
+        let (xs, ys): (Vec<f64>, Vec<f64>) = ts.iter().map(|&t| raster_turn(t)).unzip();
+        let p = PathLog::new(ts, xs, ys).unwrap();
+        assert_eq!(p.with_corners(), p);
     }
 
     #[test]
