@@ -165,7 +165,12 @@ impl PathLog {
                 continue;
             }
             let (t1, t2) = (u * at / la, w * ct / lc);
-            out.t_s.push(self.t_s[k] + bt * t1 / (t1 + t2));
+            let tv = self.t_s[k] + bt * t1 / (t1 + t2);
+            // Times stay strictly increasing (a vertex within rounding of a sample is left out).
+            if !(tv > self.t_s[k] && tv < self.t_s[k + 1]) {
+                continue;
+            }
+            out.t_s.push(tv);
             out.x_mm.push(self.x_mm[k] + u * ux);
             out.y_mm.push(self.y_mm[k] + u * uy);
         }
