@@ -1,7 +1,9 @@
 //! Tool paths: commanded tool-centre positions sampled in time (the shared map frame, mm).
 //!
 //! Between samples the tool moves in a straight line at constant speed, so the dwell a point
-//! receives is the time the tool centre spends there. [`raster`] generates grating paths,
+//! receives is the time the tool centre spends there. (Calibration reads a log through
+//! [`PathLog::with_corners`] first, which puts back the raster corners a sparse log's chords
+//! cut; the process model's own removal still reads the chords as written.) [`raster`] generates grating paths,
 //! [`log`] reads path logs (`t_s,x_mm,y_mm` CSV), [`kinematics`] turns a dwell map into feeds and
 //! applies the machine's velocity and acceleration limits.
 
