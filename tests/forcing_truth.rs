@@ -409,7 +409,7 @@ fn crossings(p: &PathLog, x_mm: f64) -> Vec<f64> {
 /// the generator re-times its fine motion; the log's samples cut the raster's corners, and
 /// re-timing the chords stretched the run to 65.585 s against the generator's 64.854 s, so
 /// the spindle phase from line to line drifted (the imprints of neighbouring lines add with
-/// that phase). With the corners restored (`restore_corners`): 64.858 s.
+/// that phase). With the corners restored (`PathLog::with_corners`): 64.858 s.
 #[test]
 fn coupling_clock_from_the_log_is_the_runs() {
     let spec = recipe_runs(RECIPE_SEED)[0].clone();

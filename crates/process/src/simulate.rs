@@ -242,7 +242,9 @@ pub struct Prediction {
     pub after: Surface,
 }
 
-/// Removal (nm) of a path on a grid.
+/// Removal (nm) of a path (a log, read with its sampled corners restored:
+/// [`PathLog::with_corners`], as calibration and the vibration coupling read it) on a grid.
+/// `weights` are per sample of `path` (linear in time between samples).
 pub fn removal(
     tool: &ToolModel,
     path: &PathLog,
@@ -250,10 +252,22 @@ pub fn removal(
     weights: Option<&[f64]>,
     mode: Mode,
 ) -> Result<Array2<f64>, ProcessError> {
+    if let Some(w) = weights {
+        if w.len() != path.len() {
+            return Err(ProcessError::invalid(format!(
+                "{} weights for {} path samples",
+                w.len(),
+                path.len()
+            )));
+        }
+    }
+    let motion = path.with_corners();
+    let weights = weights.map(|w| path.values_at(w, &motion.t_s));
+    let weights = weights.as_deref();
     match mode {
-        Mode::Fast => tool.fast_removal(grid)?.removal(path, weights),
+        Mode::Fast => tool.fast_removal(grid)?.removal(&motion, weights),
         Mode::Exact => deposit_exact(
-            path,
+            &motion,
             &tool.seen_field(),
             grid,
             weights,
@@ -309,5 +323,114 @@ mod footprint_tests {
         assert!(ToolModel::from_source(&gaussian(1002.0), None, 1.0, 1.0).is_err());
         // An ordinary tool at a fine pixel is untouched.
         assert!(ToolModel::from_source(&gaussian(20.0), None, 0.05, 0.05).is_ok());
+    }
+}
+
+#[cfg(test)]
+mod log_reading_tests {
+    use super::*;
+    use crate::tif::GaussianTif;
+
+    /// A bidirectional raster: 20 mm lines at 5 mm/s, 2 mm pitch steps at 2 mm/s. Its vertices
+    /// (t, x, y).
+    fn raster_vertices() -> Vec<(f64, f64, f64)> {
+        let mut v = vec![(0.0, 0.0, 0.0)];
+        for k in 0..4 {
+            let (t, _, y) = *v.last().unwrap();
+            let xe = if k % 2 == 0 { 20.0 } else { 0.0 };
+            v.push((t + 4.0, xe, y));
+            if k < 3 {
+                v.push((t + 5.0, xe, y + 2.0));
+            }
+        }
+        v
+    }
+
+    fn motion_at(v: &[(f64, f64, f64)], t: f64) -> (f64, f64) {
+        let k = v.iter().rposition(|p| p.0 <= t).unwrap().min(v.len() - 2);
+        let (a, b) = (v[k], v[k + 1]);
+        let f = ((t - a.0) / (b.0 - a.0)).clamp(0.0, 1.0);
+        (a.1 + f * (b.1 - a.1), a.2 + f * (b.2 - a.2))
+    }
+
+    /// `simulate` reads a log with the corners its samples cut restored: a 10 Hz log of a
+    /// raster whose samples miss every turn gives the removal of the motion itself (exact
+    /// deposition of the motion sampled on its corners), where the chords would not; and a
+    /// rate weight given per log sample follows.
+    #[test]
+    fn a_sparse_log_is_read_as_the_motion_it_sampled() {
+        let v = raster_vertices();
+        let end = v.last().unwrap().0;
+        let ts: Vec<f64> = (0..)
+            .map(|k| 0.037 + 0.1 * k as f64)
+            .take_while(|&t| t < end)
+            .collect();
+        let (xs, ys): (Vec<f64>, Vec<f64>) = ts.iter().map(|&t| motion_at(&v, t)).unzip();
+        let log = PathLog::new(ts.clone(), xs, ys).unwrap();
+        // The truth: the motion's own vertices and samples between them, on the log's span.
+        let mut tt: Vec<f64> = (0..=((end / 0.01) as usize))
+            .map(|k| k as f64 * 0.01)
+            .chain(v.iter().map(|p| p.0))
+            .filter(|&t| t >= ts[0] && t <= *ts.last().unwrap())
+            .chain([ts[0], *ts.last().unwrap()])
+            .collect();
+        tt.sort_by(f64::total_cmp);
+        tt.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+        let (mx, my): (Vec<f64>, Vec<f64>) = tt.iter().map(|&t| motion_at(&v, t)).unzip();
+        let motion = PathLog::new(tt.clone(), mx, my).unwrap();
+
+        let src = TifSource::Gaussian(GaussianTif::new(1.0, 6.0, 10.0).unwrap());
+        let tool = ToolModel::from_source(&src, None, 0.25, 0.25).unwrap();
+        let grid = Grid::new(72, 120, 0.25, 0.25, -5.0, -5.0).unwrap();
+        let exact = |p: &PathLog, w: Option<&[f64]>| {
+            deposit_exact(p, &tool.seen_field(), &grid, w, &ExactOptions::default()).unwrap()
+        };
+        let truth = exact(&motion, None);
+        let peak = truth.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let worst = |a: &Array2<f64>, b: &Array2<f64>| {
+            (a - b).iter().fold(0.0f64, |m, v| m.max(v.abs())) / peak
+        };
+        let read = removal(&tool, &log, &grid, None, Mode::Exact).unwrap();
+        let chords = exact(&log, None);
+        let (e_read, e_chords) = (worst(&read, &truth), worst(&chords, &truth));
+        let fine = ExactOptions {
+            max_step_mm: Some(0.004),
+            ..ExactOptions::default()
+        };
+        let fine_walk =
+            |p: &PathLog| deposit_exact(p, &tool.seen_field(), &grid, None, &fine).unwrap();
+        // Walked at 4 um the restored log is the motion to 3e-5 of the peak.
+        let e_fine = worst(&fine_walk(&log.with_corners()), &fine_walk(&motion));
+        assert!(e_fine < 1e-4, "fine walk {e_fine}");
+        eprintln!("read {e_read:.3e}, chords {e_chords:.3e} of the peak");
+        assert!(e_chords > 0.003, "chords {e_chords}");
+        // What is left at the default walk is its own sub-step error (midpoints 1/16 mm apart
+        // on different segments: about 3e-4 of the peak; see the finer walk above).
+        assert!(
+            e_read < 5e-4 && e_read < 0.1 * e_chords,
+            "read {e_read} (chords {e_chords})"
+        );
+        // The fast model reads it the same way.
+        let fast = removal(&tool, &log, &grid, None, Mode::Fast).unwrap();
+        let fast_truth = removal(&tool, &motion, &grid, None, Mode::Fast).unwrap();
+        assert!(
+            worst(&fast, &fast_truth) < 1e-3,
+            "{}",
+            worst(&fast, &fast_truth)
+        );
+        // A weight linear in time, given per log sample, is the motion's weight at its times.
+        let w = |t: &f64| 1.0 + 0.02 * t;
+        let wl: Vec<f64> = ts.iter().map(w).collect();
+        let wm: Vec<f64> = tt.iter().map(w).collect();
+        let read_w = removal(&tool, &log, &grid, Some(&wl), Mode::Exact).unwrap();
+        let truth_w = exact(&motion, Some(&wm));
+        assert!(
+            worst(&read_w, &truth_w) < 1e-3,
+            "{}",
+            worst(&read_w, &truth_w)
+        );
+        assert!(worst(&read_w, &read) > 0.01);
+        // Weights that do not match the log are refused.
+        assert!(removal(&tool, &log, &grid, Some(&wl[1..]), Mode::Fast).is_err());
     }
 }

@@ -172,59 +172,6 @@ pub fn apply_limits(
     PathLog::new(t, xs, ys)
 }
 
-/// Sine of the turn between two straight runs of a path below which no corner is restored
-/// (60 deg: a raster's turnarounds turn 90 deg, a curve's sample-to-sample turns are small).
-const CORNER_MIN_SIN: f64 = 0.866;
-
-/// `path` with the corners its samples cut restored: where a segment joins two straight runs
-/// that meet at a sharp corner (the turn between them over 60 deg) and both runs extended meet
-/// between the segment's ends, the corner point is inserted at the time that splits the
-/// segment's duration by the lengths of the two legs. A log sampled in time (50 Hz) joins the
-/// last sample before a raster's turnaround to the first after it by a chord; re-timed under
-/// an acceleration limit that chord is a different path (two shallow turns, a shorter length)
-/// from the one the robot ran. Samples are kept, times only added.
-pub fn restore_corners(path: &PathLog) -> PathLog {
-    let n = path.len();
-    if n < 4 {
-        return path.clone();
-    }
-    let (px, py, pt) = (&path.x_mm, &path.y_mm, &path.t_s);
-    let dir = |a: usize, b: usize| {
-        let (dx, dy) = (px[b] - px[a], py[b] - py[a]);
-        let l = dx.hypot(dy);
-        (l > 1e-12).then(|| (dx / l, dy / l))
-    };
-    let mut t = Vec::with_capacity(n + n / 8);
-    let mut x = Vec::with_capacity(n + n / 8);
-    let mut y = Vec::with_capacity(n + n / 8);
-    t.push(pt[0]);
-    x.push(px[0]);
-    y.push(py[0]);
-    for k in 0..n - 1 {
-        if k >= 1 && k + 2 < n {
-            if let (Some(a), Some(c), Some(b)) = (dir(k - 1, k), dir(k, k + 1), dir(k + 1, k + 2)) {
-                let cross = a.0 * b.1 - a.1 * b.0;
-                let turned = |d: (f64, f64)| (d.0 * c.0 + d.1 * c.1) < 1.0 - 1e-9;
-                if cross.abs() > CORNER_MIN_SIN && turned(a) && turned(b) {
-                    // P_k + s a = P_{k+1} − r b.
-                    let (ex, ey) = (px[k + 1] - px[k], py[k + 1] - py[k]);
-                    let s = (ex * b.1 - ey * b.0) / cross;
-                    let r = (ey * a.0 - ex * a.1) / cross;
-                    if s > 0.0 && r > 0.0 {
-                        t.push(pt[k] + (pt[k + 1] - pt[k]) * s / (s + r));
-                        x.push(px[k] + s * a.0);
-                        y.push(py[k] + s * a.1);
-                    }
-                }
-            }
-        }
-        t.push(pt[k + 1]);
-        x.push(px[k + 1]);
-        y.push(py[k + 1]);
-    }
-    PathLog::new(t, x, y).unwrap_or_else(|_| path.clone())
-}
-
 /// A raster whose feed realises `dwell_density_s_per_mm2` (on `grid`), under `limits`.
 /// Returns the commanded path (feeds clamped but no acceleration limit) and the realised one.
 pub fn dwell_raster(
@@ -287,41 +234,6 @@ pub fn dwell_raster(
 
 #[cfg(test)]
 mod tests {
-    #[test]
-    fn restore_corners_puts_back_a_raster_turn() {
-        use super::restore_corners;
-        use crate::path::PathLog;
-        // 10 mm/s along +x to (10, 0), then +y: samples every 0.15 s cut the corner.
-        let t: Vec<f64> = (0..15).map(|k| k as f64 * 0.15).collect();
-        let at = |t: f64| {
-            let s = 10.0 * t;
-            if s <= 10.0 {
-                (s, 0.0)
-            } else {
-                (10.0, s - 10.0)
-            }
-        };
-        let (x, y): (Vec<f64>, Vec<f64>) = t.iter().map(|&t| at(t)).unzip();
-        let p = PathLog::new(t.clone(), x, y).unwrap();
-        let r = restore_corners(&p);
-        assert_eq!(r.len(), p.len() + 1);
-        let k = r
-            .x_mm
-            .iter()
-            .zip(&r.y_mm)
-            .position(|(&x, &y)| x == 10.0 && y == 0.0);
-        let k = k.expect("corner (10, 0) restored");
-        assert!((r.t_s[k] - 1.0).abs() < 1e-12, "corner at {} s", r.t_s[k]);
-        // A straight path and a gentle curve are left alone.
-        let q = PathLog::new(
-            t.clone(),
-            t.clone(),
-            t.iter().map(|v| 0.1 * v * v).collect(),
-        )
-        .unwrap();
-        assert_eq!(restore_corners(&q).len(), q.len());
-    }
-
     use super::*;
 
     #[test]

@@ -1,9 +1,10 @@
 //! Tool paths: commanded tool-centre positions sampled in time (the shared map frame, mm).
 //!
 //! Between samples the tool moves in a straight line at constant speed, so the dwell a point
-//! receives is the time the tool centre spends there. (Calibration reads a log through
+//! receives is the time the tool centre spends there. Every model that reads a log (the
+//! process model's `simulate`, the vibration coupling, calibration) reads it through
 //! [`PathLog::with_corners`] first, which puts back the raster corners a sparse log's chords
-//! cut; the process model's own removal still reads the chords as written.) [`raster`] generates grating paths,
+//! cut; a path sampled on its corners (a generated raster) is unchanged by it. [`raster`] generates grating paths,
 //! [`log`] reads path logs (`t_s,x_mm,y_mm` CSV), [`kinematics`] turns a dwell map into feeds and
 //! applies the machine's velocity and acceleration limits.
 
@@ -179,6 +180,27 @@ impl PathLog {
         out
     }
 
+    /// Per-sample `values` of this path (linear in time between samples) at `times` (s, within
+    /// the path's span and increasing): how a per-sample quantity (a rate weight) follows the
+    /// path onto [`Self::with_corners`]' or [`Self::densified`]'s samples.
+    pub fn values_at(&self, values: &[f64], times: &[f64]) -> Vec<f64> {
+        let n = self.len().min(values.len());
+        let mut k = 0;
+        times
+            .iter()
+            .map(|&t| {
+                if n < 2 {
+                    return values.first().copied().unwrap_or(0.0);
+                }
+                while k + 2 < n && self.t_s[k + 1] <= t {
+                    k += 1;
+                }
+                let f = ((t - self.t_s[k]) / (self.t_s[k + 1] - self.t_s[k])).clamp(0.0, 1.0);
+                values[k] + f * (values[k + 1] - values[k])
+            })
+            .collect()
+    }
+
     /// Sub-steps of the path: for every segment, `m` equal pieces no longer than `max_step_mm`
     /// (and no longer than `max_dt_s` in time), each given as (midpoint x, y, duration, segment
     /// index, fraction along the segment at the midpoint). Calls `f` for each.
@@ -293,6 +315,15 @@ mod tests {
             })
             .fold(0.0, f64::max);
         assert!(cut > 0.1, "{cut}");
+        // Read once, the corners are the path's own: a second reading changes nothing.
+        assert_eq!(c.with_corners(), c);
+        // A per-sample weight linear in time follows onto the restored samples exactly.
+        let w: Vec<f64> = p.t_s.iter().map(|t| 1.0 + 0.03 * t).collect();
+        let wc = p.values_at(&w, &c.t_s);
+        assert_eq!(wc.len(), c.len());
+        for (v, t) in wc.iter().zip(&c.t_s) {
+            assert!((v - (1.0 + 0.03 * t)).abs() < 1e-12, "{v} at {t}");
+        }
     }
 
     #[test]

@@ -18,7 +18,7 @@ use super::stream::{CouplingSample, SampleStream};
 use super::{CouplingInput, CouplingOptions, MechanismMaps, Mechanisms};
 use crate::error::VibrationError;
 use crate::params::{Bonnet, LateralAxis, VibrationParams};
-use bonnetlab_process::path::kinematics::{apply_limits, restore_corners, Limits};
+use bonnetlab_process::path::kinematics::{apply_limits, Limits};
 use bonnetlab_process::path::PathLog;
 use bonnetlab_process::perturb::{
     Axis, Derivative, DerivativeKernels, KernelConvolver, OffsetTif, WeightedDwell,
@@ -32,25 +32,39 @@ const NV: usize = 10;
 /// Samples per message between the integrating and the splatting thread.
 const CHUNK: usize = 1 << 14;
 
-/// The path the robot executes: re-timed under its acceleration limit when `dwell_execution`
-/// is on (bonnetlab_process::path::kinematics::apply_limits), else the commanded one. The
-/// path's corners are restored first (`restore_corners`): a logged path's chord across a
-/// corner is not where the robot went, and re-timing it stretched the sample run's clock
-/// (65.59 s against the 64.85 s of the generator's motion re-timed the same way).
+/// The commanded motion of a run: its path log read with the corners its samples cut restored
+/// ([`PathLog::with_corners`], the one reading of a log that `simulate` and calibration use).
+/// A logged chord across a corner is not where the robot went: re-timing it stretched the
+/// sample run's clock (65.59 s against the 64.85 s of the generator's motion re-timed the same
+/// way), and the unperturbed removal would differ from `simulate`'s.
+pub fn commanded_path(input: &CouplingInput<'_>) -> PathLog {
+    input.path.with_corners()
+}
+
+/// The path the robot executes: the commanded motion ([`commanded_path`]) re-timed under its
+/// acceleration limit when `dwell_execution` is on
+/// (bonnetlab_process::path::kinematics::apply_limits), else the commanded motion itself.
 pub fn executed_path(
     input: &CouplingInput<'_>,
     mech: &Mechanisms,
 ) -> Result<PathLog, VibrationError> {
+    executed_from(input, &commanded_path(input), mech)
+}
+
+fn executed_from(
+    input: &CouplingInput<'_>,
+    commanded: &PathLog,
+    mech: &Mechanisms,
+) -> Result<PathLog, VibrationError> {
     if !mech.dwell_execution {
-        return Ok(input.path.clone());
+        return Ok(commanded.clone());
     }
     let limits = Limits {
         a_max_mm_per_s2: input.params.accel_max_mm_per_s2,
         ..Limits::default()
     };
     let ds = 0.5 * input.grid.dx_mm.min(input.grid.dy_mm);
-    apply_limits(&restore_corners(input.path), &limits, ds)
-        .map_err(|e| VibrationError::Process(e.to_string()))
+    apply_limits(commanded, &limits, ds).map_err(|e| VibrationError::Process(e.to_string()))
 }
 
 /// The instantaneous TIF of the run's tool under an offset change (process's [`OffsetTif`]).
@@ -117,15 +131,16 @@ pub fn fast_maps_lagged(
     let p = input.params;
     let g = input.grid;
     let mech = &opts.mechanisms;
-    let exec = executed_path(input, mech)?;
+    let commanded = commanded_path(input);
+    let exec = executed_from(input, &commanded, mech)?;
     let zeros = || Array2::<f64>::zeros((g.rows, g.cols));
 
     // Unperturbed removal of the commanded path and of the executed one: the one fast model.
     let mut fast = input.tool.fast_removal(&g).map_err(perr)?;
     let baseline = if lag_mm != 0.0 {
-        fast.removal(&direction_lag_path(input.path, lag_mm)?, None)
+        fast.removal(&direction_lag_path(&commanded, lag_mm)?, None)
     } else {
-        fast.removal(input.path, None)
+        fast.removal(&commanded, None)
     }
     .map_err(perr)?;
     let dwell_execution = if mech.dwell_execution {
