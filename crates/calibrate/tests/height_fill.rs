@@ -5,10 +5,11 @@
 //! corners), not against the surrogates' own construction. And the generator's reference
 //! plane: `SynthRun::valid_plane_offset_nm` against the calibration's own plane fit.
 
-use bonnetlab_calibrate::fill_error::height_fill_errors;
+use bonnetlab_calibrate::fill_error::{height_fill_errors, height_resolution_errors};
 use bonnetlab_calibrate::grid::{sample, smooth_masked};
 use bonnetlab_calibrate::model::plane_fit;
 use bonnetlab_calibrate::synth::{generate, InitialSurface, SynthConfig};
+use bonnetlab_surface::rng::Rng;
 use ndarray::Array2;
 
 fn round_and_square(seed: u64, noise: f64) -> (SynthConfig, SynthConfig) {
@@ -121,6 +122,97 @@ fn fill_errors_vanish_inside_the_data_and_match_the_true_corners_outside() {
         assert!(
             inside_draws < 0.03 * corner_draws,
             "inside {inside_draws} nm"
+        );
+    }
+}
+
+/// A surface with detail below the map's pixel: `n` plane waves, frequencies log-uniform from
+/// 1/100 to 1.6 cycles per mm (twice the Nyquist of 0.625 mm pixels), directions and phases
+/// uniform, amplitudes for an isotropic 2-D PSD falling as f^-beta2, scaled to 140 nm RMS. Built
+/// from its own waves, not an FFT, so it is neither periodic on the map nor band-limited.
+fn plane_waves(seed: u64, beta2: f64, n: usize) -> impl Fn(f64, f64) -> f64 {
+    let mut rng = Rng::new(seed);
+    let (lo, hi) = (0.01f64.ln(), 1.6f64.ln());
+    let mut waves: Vec<(f64, f64, f64, f64)> = (0..n)
+        .map(|_| {
+            let f = (lo + (hi - lo) * rng.uniform()).exp();
+            let th = 2.0 * std::f64::consts::PI * rng.uniform();
+            let ph = 2.0 * std::f64::consts::PI * rng.uniform();
+            // Log-uniform frequencies: each wave carries f^2 S(f) of the variance.
+            let a = f.powf(1.0 - 0.5 * beta2);
+            (
+                2.0 * std::f64::consts::PI * f * th.cos(),
+                2.0 * std::f64::consts::PI * f * th.sin(),
+                ph,
+                a,
+            )
+        })
+        .collect();
+    let var: f64 = waves.iter().map(|w| 0.5 * w.3 * w.3).sum();
+    let k = 140.0 / var.sqrt();
+    for w in &mut waves {
+        w.3 *= k;
+    }
+    move |x: f64, y: f64| {
+        waves
+            .iter()
+            .map(|w| w.3 * (w.0 * x + w.1 * y + w.2).cos())
+            .sum()
+    }
+}
+
+#[test]
+fn resolution_errors_match_the_detail_a_surface_has_below_its_pixels() {
+    // The path and grid of a generated square run (160^2 at 0.625 mm, noise free); its before
+    // map replaced by point samples of a surface with detail to twice the map's Nyquist. The
+    // truth at every sub-step is that surface's own height there (about the plane the model
+    // removes), against the model's covariate (the map smoothed over 2 px).
+    for (seed, beta2) in [(5u64, 2.9), (6, 3.3), (7, 3.6)] {
+        let cfg = SynthConfig {
+            dropout_fraction: 0.0,
+            ..SynthConfig::realistic(seed, 160, 100.0, InitialSurface::realistic_texture(2.2))
+                .with_noise_nm(0.0, 0.0)
+        };
+        let mut run = generate(&cfg).expect("run");
+        let h = plane_waves(seed, beta2, 12000);
+        let g0 = bonnetlab_calibrate::grid::MapGrid::of(&run.before).expect("grid");
+        let z = Array2::from_shape_fn(run.before.heights_nm().dim(), |(i, j)| {
+            h(g0.x_mm(j), g0.y_mm(i))
+        });
+        run.before = run.before.with_heights(z).expect("before");
+        let p = run.problem().expect("problem");
+        let g = &p.grid;
+        let sigma_mm = 2.0 * g.dx_mm;
+        let model = p.local_height(sigma_mm);
+        let [pz, px, py] = plane_fit(g, &p.before, &p.before_valid);
+        let (cx, cy) = g.centre_mm();
+        let s = &p.samples;
+        // On the map, the smoothing window clear of its edges (the overrun is the fill's).
+        let m = 4.0 * sigma_mm + 2.0 * g.dx_mm;
+        let (xe, ye) = (g.x_mm(g.cols - 1), g.y_mm(g.rows - 1));
+        let inside: Vec<usize> = (0..s.len())
+            .filter(|&k| (m..=xe - m).contains(&s.x_mm[k]) && (m..=ye - m).contains(&s.y_mm[k]))
+            .collect();
+        assert!(inside.len() > 1000);
+        let err = |k: usize| {
+            let (x, y) = (s.x_mm[k], s.y_mm[k]);
+            h(x, y) - pz - px * (x - cx) - py * (y - cy) - model[k]
+        };
+        let actual =
+            (inside.iter().map(|&k| err(k).powi(2)).sum::<f64>() / inside.len() as f64).sqrt();
+        let draws = height_resolution_errors(&p, sigma_mm, 16);
+        assert_eq!(draws.len(), 16);
+        let drawn = (draws
+            .iter()
+            .map(|d| inside.iter().map(|&k| d[k] * d[k]).sum::<f64>() / inside.len() as f64)
+            .sum::<f64>()
+            / draws.len() as f64)
+            .sqrt();
+        eprintln!("beta2 {beta2}: true resolution error {actual:.2} nm RMS, drawn {drawn:.2} nm");
+        assert!(actual > 0.5, "{actual}");
+        assert!(
+            drawn > actual / 1.3 && drawn < 1.3 * actual,
+            "drawn {drawn} nm against the true {actual} nm"
         );
     }
 }

@@ -96,7 +96,7 @@ impl Effect for RateCovariate {
         let sigma_mm = crate::model::height_smooth_mm(&p.grid);
         vec![(
             self.col(),
-            crate::fill_error::height_fill_errors(p, sigma_mm, draws),
+            crate::fill_error::height_errors(p, sigma_mm, draws),
         )]
     }
     fn params(&self, lin: &Linear) -> Vec<(String, Param)> {
@@ -203,7 +203,7 @@ impl Effect for LocalHeight {
     fn term_errors(&self, p: &Problem, draws: usize) -> Vec<(String, Vec<Vec<f64>>)> {
         vec![(
             self.col(),
-            crate::fill_error::height_fill_errors(p, self.smooth_mm, draws),
+            crate::fill_error::height_errors(p, self.smooth_mm, draws),
         )]
     }
     fn implausible(&self, p: &Problem, _lin: &Linear) -> Option<String> {
