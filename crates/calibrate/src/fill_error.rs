@@ -91,6 +91,23 @@ fn map_spectrum(p: &Problem) -> Option<(Fft2, Vec<Complex<f64>>, f64)> {
     Some((fft, spec, ms))
 }
 
+/// The Gaussian smoothing's transfer function over `sigma_mm` on the map grid, element by
+/// element of `fft`'s transposed half spectrum (element k1 * rows + k0).
+fn smoothing_gain(p: &Problem, fft: &Fft2, sigma_mm: f64) -> Vec<f64> {
+    let g = &p.grid;
+    let (n0, n1) = (g.rows, g.cols);
+    let k = 2.0 * std::f64::consts::PI * std::f64::consts::PI * sigma_mm * sigma_mm;
+    let mut gain = vec![0.0; fft.spectrum_len()];
+    for k1 in 0..n1 / 2 + 1 {
+        for k0 in 0..n0 {
+            let (a, b) = crate::synth::field::freq(k0, k1, n0, n1, 1.0);
+            let (fy, fx) = (a / g.dy_mm, b / g.dx_mm);
+            gain[k1 * n0 + k0] = (-k * (fx * fx + fy * fy)).exp();
+        }
+    }
+    gain
+}
+
 /// `draws` errors (nm) of the local height at the problem's sub-steps with smoothing
 /// `sigma_mm` (see the module note): true local height of a surrogate minus the model's fill
 /// of it. Empty when the before map has too few valid pixels for a spectrum, or when the
@@ -102,18 +119,7 @@ pub fn height_fill_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec<Vec<f
         return Vec::new();
     };
     let (n0, n1) = (g.rows, g.cols);
-    // The smoothing's transfer function, element by element of the transposed half spectrum
-    // (element k1 * n0 + k0).
-    let k = 2.0 * std::f64::consts::PI * std::f64::consts::PI * sigma_mm * sigma_mm;
-    let nh = n1 / 2 + 1;
-    let mut gain = vec![0.0; fft.spectrum_len()];
-    for k1 in 0..nh {
-        for k0 in 0..n0 {
-            let (a, b) = crate::synth::field::freq(k0, k1, n0, n1, 1.0);
-            let (fy, fx) = (a / g.dy_mm, b / g.dx_mm);
-            gain[k1 * n0 + k0] = (-k * (fx * fx + fy * fy)).exp();
-        }
-    }
+    let gain = smoothing_gain(p, &fft, sigma_mm);
     let xs = &p.samples.x_mm;
     let ys = &p.samples.y_mm;
     let out: Vec<Vec<f64>> = (0..draws)
@@ -236,15 +242,7 @@ pub fn height_resolution_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec
         }
     }
     // The covariate's smoothing on the map grid.
-    let k = 2.0 * std::f64::consts::PI * std::f64::consts::PI * sigma_mm * sigma_mm;
-    let mut gain = vec![0.0; fft.spectrum_len()];
-    for k1 in 0..nh {
-        for k0 in 0..n0 {
-            let (a, b) = crate::synth::field::freq(k0, k1, n0, n1, 1.0);
-            let (fy, fx) = (a / g.dy_mm, b / g.dx_mm);
-            gain[k1 * n0 + k0] = (-k * (fx * fx + fy * fy)).exp();
-        }
-    }
+    let gain = smoothing_gain(p, &fft, sigma_mm);
     let xs = &p.samples.x_mm;
     let ys = &p.samples.y_mm;
     let out: Vec<Vec<f64>> = (0..draws)

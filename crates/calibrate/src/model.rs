@@ -829,15 +829,11 @@ pub fn height_smooth_mm(g: &MapGrid) -> f64 {
 /// measurement noise does not dominate the slope), signed distance to the part edge (mm).
 fn covariates(g: &MapGrid, before: &Surface, s: &Samples) -> Covariates {
     let valid = before.valid();
-    // The local height at 2 px: on the map's own grid (no blocks below 8 px).
-    let sm = match local_height_map(g, before.heights_nm(), valid, height_smooth_mm(g)) {
-        Some((_, sm)) => sm,
-        None => smooth_masked(
-            &plane_removed(g, before.heights_nm(), valid),
-            valid,
-            HEIGHT_SMOOTH_PX,
-        ),
-    };
+    // The local height at 2 px: on the map's own grid (no blocks below 8 px, so the map's
+    // grid always forms; zero, as `local_height_at` gives, if it did not).
+    let sm = local_height_map(g, before.heights_nm(), valid, height_smooth_mm(g))
+        .map(|(_, sm)| sm)
+        .unwrap_or_else(|| Array2::zeros((g.rows, g.cols)));
     let slope = Array2::from_shape_fn((g.rows, g.cols), |(i, j)| {
         let jp = (j + 1).min(g.cols - 1);
         let jm = j.saturating_sub(1);

@@ -29,7 +29,7 @@ use crate::tif::motion::{
 };
 use crate::tif::{RateField, Tif};
 
-fn check_weights(path: &PathLog, weights: Option<&[f64]>) -> Result<(), ProcessError> {
+pub(crate) fn check_weights(path: &PathLog, weights: Option<&[f64]>) -> Result<(), ProcessError> {
     if let Some(w) = weights {
         if w.len() != path.len() {
             return Err(ProcessError::invalid(format!(

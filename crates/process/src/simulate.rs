@@ -252,15 +252,7 @@ pub fn removal(
     weights: Option<&[f64]>,
     mode: Mode,
 ) -> Result<Array2<f64>, ProcessError> {
-    if let Some(w) = weights {
-        if w.len() != path.len() {
-            return Err(ProcessError::invalid(format!(
-                "{} weights for {} path samples",
-                w.len(),
-                path.len()
-            )));
-        }
-    }
+    crate::removal::check_weights(path, weights)?;
     let motion = path.with_corners();
     let weights = weights.map(|w| path.values_at(w, &motion.t_s));
     let weights = weights.as_deref();
