@@ -180,8 +180,10 @@ pub fn height_fill_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec<Vec<f
 /// that spectrum between 0.08 and 0.3 cycles per pixel (continued to twice the map's Nyquist,
 /// the finest the fine grid holds); the map is its every other sample, the model's covariate
 /// that map smoothed over `sigma_mm` (periodically, so the overrun's fill, the other term, is
-/// left out), the truth the surrogate's own height at the sub-step. Empty when the spectrum
-/// cannot be fitted (too few valid pixels, or no fall with frequency).
+/// left out), the truth the surrogate's own height at the sub-step. The map's pixels are taken
+/// as point samples, also when a recipe says `area` (a camera's pixel means fold less of the
+/// fine detail in, so the draws are then somewhat wide). Empty when the spectrum cannot be
+/// fitted (too few valid pixels, or no fall with frequency).
 pub fn height_resolution_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec<Vec<f64>> {
     let g = &p.grid;
     let (n0, n1) = (g.rows, g.cols);
