@@ -52,8 +52,9 @@ const SEED: u64 = 0x6f1e_a4c3_2b97_d805;
 /// pixels, tapered to zero over 8 pixels inside the part's edge (a raised cosine of the
 /// distance to it: the map's border and a round aperture's rim would otherwise leak along the
 /// axes, about f^-2, flatter than a steep surface's own fall), transformed; with its mean
-/// square over the valid pixels. `None` with too few valid pixels.
-fn map_spectrum(p: &Problem) -> Option<(Fft2, Vec<Complex<f64>>, f64)> {
+/// square over the valid pixels, and the smoothing over `sigma_mm`. `None` with too few valid
+/// pixels.
+fn map_spectrum(p: &Problem, sigma_mm: f64) -> Option<MapSpectrum> {
     let g = &p.grid;
     let valid = &p.before_valid;
     let nvalid = valid.iter().filter(|v| **v).count();
@@ -88,7 +89,29 @@ fn map_spectrum(p: &Problem) -> Option<(Fft2, Vec<Complex<f64>>, f64)> {
     let mut tmp = vec![zero; fft.spectrum_len()];
     let mut spec = vec![zero; fft.spectrum_len()];
     fft.forward(&mut real, &mut tmp, &mut spec);
-    Some((fft, spec, ms))
+    let gain = smoothing_gain(p, &fft, sigma_mm);
+    Some(MapSpectrum {
+        fft,
+        spec,
+        ms,
+        gain,
+    })
+}
+
+/// What both terms draw from (see [`map_spectrum`]), computed once per calibration.
+struct MapSpectrum {
+    fft: Fft2,
+    /// The tapered map's half spectrum (element k1 * rows + k0).
+    spec: Vec<Complex<f64>>,
+    /// The map's mean square over its valid pixels (nm^2).
+    ms: f64,
+    /// The covariate's smoothing on the map grid ([`smoothing_gain`]).
+    gain: Vec<f64>,
+}
+
+/// The random numbers of draw `d` of a term (`salt` tells the terms apart).
+fn draw_rng(salt: u64, d: usize) -> Rng {
+    Rng::new(salt ^ (d as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15))
 }
 
 /// The Gaussian smoothing's transfer function over `sigma_mm` on the map grid, element by
@@ -113,19 +136,23 @@ fn smoothing_gain(p: &Problem, fft: &Fft2, sigma_mm: f64) -> Vec<f64> {
 /// of it. Empty when the before map has too few valid pixels for a spectrum, or when the
 /// fill is exact (every sub-step's smoothing window within the data).
 pub fn height_fill_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec<Vec<f64>> {
+    match map_spectrum(p, sigma_mm) {
+        Some(m) => fill_draws(p, &m, sigma_mm, draws),
+        None => Vec::new(),
+    }
+}
+
+fn fill_draws(p: &Problem, m: &MapSpectrum, sigma_mm: f64, draws: usize) -> Vec<Vec<f64>> {
     let g = &p.grid;
     let valid = &p.before_valid;
-    let Some((fft, spec, ms)) = map_spectrum(p).filter(|_| draws > 0) else {
-        return Vec::new();
-    };
+    let (fft, spec, ms, gain) = (&m.fft, &m.spec, m.ms, m.gain.as_slice());
     let (n0, n1) = (g.rows, g.cols);
-    let gain = smoothing_gain(p, &fft, sigma_mm);
     let xs = &p.samples.x_mm;
     let ys = &p.samples.y_mm;
     let out: Vec<Vec<f64>> = (0..draws)
         .into_par_iter()
         .map(|d| {
-            let mut rng = Rng::new(SEED ^ (d as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            let mut rng = draw_rng(SEED, d);
             let dev: Vec<Complex<f64>> = spec
                 .iter()
                 .map(|z| z * Complex::new(rng.normal(), rng.normal()))
@@ -138,7 +165,7 @@ pub fn height_fill_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec<Vec<f
                 Array2::from_shape_vec((n0, n1), real).unwrap_or_else(|_| Array2::zeros((n0, n1)))
             };
             let mut surf = inverse(&dev);
-            let smoothed: Vec<Complex<f64>> = dev.iter().zip(&gain).map(|(z, a)| z * a).collect();
+            let smoothed: Vec<Complex<f64>> = dev.iter().zip(gain).map(|(z, a)| z * a).collect();
             let mut surf_sm = inverse(&smoothed);
             // The surrogate at the measured map's RMS (its mean taken out of both).
             let n = (n0 * n1) as f64;
@@ -185,11 +212,19 @@ pub fn height_fill_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec<Vec<f
 /// fine detail in, so the draws are then somewhat wide). Empty when the spectrum cannot be
 /// fitted (too few valid pixels, or no fall with frequency).
 pub fn height_resolution_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec<Vec<f64>> {
+    match map_spectrum(p, sigma_mm) {
+        Some(m) => resolution_draws(p, &m, draws),
+        None => Vec::new(),
+    }
+}
+
+fn resolution_draws(p: &Problem, m: &MapSpectrum, draws: usize) -> Vec<Vec<f64>> {
     let g = &p.grid;
     let (n0, n1) = (g.rows, g.cols);
-    let Some((fft, spec, ms)) = map_spectrum(p).filter(|_| draws > 0 && n0 >= 8 && n1 >= 8) else {
+    if draws == 0 || n0 < 8 || n1 < 8 {
         return Vec::new();
-    };
+    }
+    let (fft, spec, ms, gain) = (&m.fft, &m.spec, m.ms, m.gain.as_slice());
     let zero = Complex::new(0.0, 0.0);
     // The power law |F|^2 = exp(a) f^-beta (f cycles per pixel) over the mid band.
     let nh = n1 / 2 + 1;
@@ -243,15 +278,12 @@ pub fn height_resolution_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec
             };
         }
     }
-    // The covariate's smoothing on the map grid.
-    let gain = smoothing_gain(p, &fft, sigma_mm);
     let xs = &p.samples.x_mm;
     let ys = &p.samples.y_mm;
     let out: Vec<Vec<f64>> = (0..draws)
         .into_par_iter()
         .map(|d| {
-            let mut rng =
-                Rng::new(SEED.rotate_left(17) ^ (d as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            let mut rng = draw_rng(SEED.rotate_left(17), d);
             let mut dev: Vec<Complex<f64>> = amp
                 .iter()
                 .map(|z| z * Complex::new(rng.normal(), rng.normal()))
@@ -273,7 +305,7 @@ pub fn height_resolution_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec
             let mut s = vec![zero; fft.spectrum_len()];
             let mut t = vec![zero; fft.spectrum_len()];
             fft.forward(&mut map, &mut t, &mut s);
-            for (z, a) in s.iter_mut().zip(&gain) {
+            for (z, a) in s.iter_mut().zip(gain) {
                 *z *= *a;
             }
             let mut sm = vec![0.0; n0 * n1];
@@ -297,8 +329,11 @@ pub fn height_resolution_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec
 /// The height covariate's unmeasured-height draws: the fill's and the resolution's, drawn
 /// independently and added draw by draw (their variances add).
 pub fn height_errors(p: &Problem, sigma_mm: f64, draws: usize) -> Vec<Vec<f64>> {
-    let fill = height_fill_errors(p, sigma_mm, draws);
-    let res = height_resolution_errors(p, sigma_mm, draws);
+    let Some(m) = map_spectrum(p, sigma_mm) else {
+        return Vec::new();
+    };
+    let fill = fill_draws(p, &m, sigma_mm, draws);
+    let res = resolution_draws(p, &m, draws);
     match (fill.is_empty(), res.is_empty()) {
         (true, _) => res,
         (_, true) => fill,
