@@ -5,10 +5,10 @@
 //! The path overruns the part by about a spot radius, and on a round aperture the tool also
 //! crosses the corners the interferometer does not see, so a good share of the dwell that
 //! shapes the removal near the rim sits where the height is not measured. The model fills it
-//! (`model::local_height_at`: the masked smoothing's neighbours near the data, the plane
-//! beyond, the border's value off the map); the true height there differs from the fill by an
-//! amount the data cannot tell, and a rate that follows the height is then fitted to a
-//! covariate that is wrong on those samples. That error is systematic for one run (every
+//! (`model::local_height_at`: the measured heights smoothed at a length growing with the
+//! distance from them, `grid::smooth_masked_reaching`; the border's value off the map); the
+//! true height there differs from the fill by an amount the data cannot tell, and a rate that
+//! follows the height is then fitted to a covariate that is wrong on those samples. That error is systematic for one run (every
 //! hold-out block sees the same fill), so neither the classical nor the block-robust covariance
 //! contains it.
 //!

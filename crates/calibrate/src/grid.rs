@@ -81,6 +81,94 @@ pub fn smooth_masked(a: &Array2<f64>, valid: &Array2<bool>, sigma_px: f64) -> Ar
         .map_collect(|&n, &d| if d > 1e-9 { n / d } else { 0.0 })
 }
 
+/// [`smooth_masked`] with the pixels beyond the data's reach filled from afar: an invalid pixel
+/// at distance `d` (pixels) from the nearest valid one takes the masked smoothing at the
+/// length `max(sigma_px, alpha d)` (interpolated in log length between smoothings at `sigma_px`
+/// times powers of two, each on block means a quarter of its length across, at least a
+/// pixel), so the height beyond a rim continues the data nearby and relaxes to their wider mean
+/// further out, instead of dropping to 0 at 4 sigma. Valid pixels, and invalid ones within
+/// `sigma_px / alpha` of the data, are [`smooth_masked`]'s values bit for bit. `alpha` of 0.5
+/// or more (below it, the first octave would blend with [`smooth_masked`]'s 0 past its reach);
+/// 0 for [`smooth_masked`] itself.
+pub fn smooth_masked_reaching(
+    a: &Array2<f64>,
+    valid: &Array2<bool>,
+    sigma_px: f64,
+    alpha: f64,
+) -> Array2<f64> {
+    let mut out = smooth_masked(a, valid, sigma_px);
+    let (r, c) = a.dim();
+    if alpha <= 0.0 || valid.iter().all(|v| *v) || !valid.iter().any(|v| *v) {
+        return out;
+    }
+    let dist = edt_mm(valid, 1.0, 1.0);
+    // Lengths past twice the map's size smooth no differently.
+    let cap = (2.0 * r.max(c) as f64 / sigma_px).log2().ceil().max(1.0);
+    // The pixels the wider smoothings decide, with their length's octave above sigma_px.
+    let far: Vec<(usize, usize, f64)> = dist
+        .indexed_iter()
+        .filter_map(|((i, j), &d)| {
+            let s = (alpha * d / sigma_px).log2().min(cap);
+            (s > 0.0).then_some((i, j, s))
+        })
+        .collect();
+    let Some(top) = far.iter().map(|f| f.2.ceil() as usize).max() else {
+        return out;
+    };
+    // Level k: the masked smoothing at sigma_px 2^k, sampled at the far pixels.
+    let levels: Vec<Vec<f64>> = (1..=top)
+        .map(|k| {
+            let sig = sigma_px * 2f64.powi(k as i32);
+            let b = ((sig / 4.0).floor() as usize).max(1);
+            let (rb, cb) = (r.div_ceil(b), c.div_ceil(b));
+            let mut num = Array2::<f64>::zeros((rb, cb));
+            let mut den = Array2::<f64>::zeros((rb, cb));
+            for ((i, j), &v) in valid.indexed_iter() {
+                if v {
+                    num[(i / b, j / b)] += a[(i, j)];
+                    den[(i / b, j / b)] += 1.0;
+                }
+            }
+            let vb = den.mapv(|w| w > 0.0);
+            let mb =
+                Array2::from_shape_fn(
+                    (rb, cb),
+                    |q| if den[q] > 0.0 { num[q] / den[q] } else { 0.0 },
+                );
+            let sm = smooth_masked(&mb, &vb, sig / b as f64);
+            let half = 0.5 * (b as f64 - 1.0);
+            far.iter()
+                .map(|&(i, j, _)| {
+                    bilinear_clamped(
+                        &sm,
+                        (i as f64 - half) / b as f64,
+                        (j as f64 - half) / b as f64,
+                    )
+                })
+                .collect()
+        })
+        .collect();
+    for (n, &(i, j, s)) in far.iter().enumerate() {
+        let k0 = s.floor() as usize;
+        let t = s - k0 as f64;
+        let at = |k: usize| {
+            if k == 0 {
+                out[(i, j)]
+            } else {
+                levels[k - 1][n]
+            }
+        };
+        let v0 = at(k0);
+        let v = if t > 0.0 {
+            (1.0 - t) * v0 + t * at(k0 + 1)
+        } else {
+            v0
+        };
+        out[(i, j)] = v;
+    }
+    out
+}
+
 /// Output row `i` of the column pass: `dst` (zeros on entry) += `w[k] src row (i - h + k)` for
 /// the taps inside the map (`c` columns a row), in ascending order.
 fn col_taps(src: &[f64], c: usize, i: usize, w: &[f64], dst: &mut [f64]) {
@@ -301,6 +389,60 @@ mod tests {
                 assert_eq!(g.to_bits(), s.to_bits(), "c {c} h {h} j {j}");
             }
         }
+    }
+
+    #[test]
+    fn the_reaching_fill_keeps_the_data_and_continues_them_past_the_smoothings_reach() {
+        // A disc of data in a larger map: a level of 7 with a ripple on it.
+        let (r, c) = (96, 128);
+        let a = Array2::from_shape_fn((r, c), |(i, j)| {
+            7.0 + (0.3 * i as f64).sin() * (0.2 * j as f64).cos()
+        });
+        let v = Array2::from_shape_fn((r, c), |(i, j)| {
+            (i as f64 - 40.0).hypot(j as f64 - 50.0) < 25.0
+        });
+        let sigma = 2.0;
+        let old = smooth_masked(&a, &v, sigma);
+        let new = smooth_masked_reaching(&a, &v, sigma, 0.5);
+        let dist = edt_mm(&v, 1.0, 1.0);
+        let mut far = 0;
+        for ((i, j), &d) in dist.indexed_iter() {
+            if d <= sigma / 0.5 {
+                // The data and the pixels the smoothing itself reaches: the same bits.
+                assert_eq!(old[(i, j)].to_bits(), new[(i, j)].to_bits(), "({i}, {j})");
+            } else if d > 4.0 * sigma * std::f64::consts::SQRT_2 + 1.0 {
+                // Past the smoothing's (square) reach the old fill is 0; the new one
+                // continues the data (their ripple averages out at the longer lengths).
+                far += 1;
+                assert_eq!(old[(i, j)], 0.0);
+                // Within the data's range (7 +- 1), and their level where it is far.
+                let tol = if d > 30.0 { 0.3 } else { 1.0 };
+                assert!(
+                    (new[(i, j)] - 7.0).abs() < tol,
+                    "({i}, {j}): {}",
+                    new[(i, j)]
+                );
+            }
+        }
+        assert!(far > 5000, "{far}");
+        // Continuous: no step between neighbours larger than the data's own.
+        let step = |m: &Array2<f64>| {
+            let mut s = 0.0f64;
+            for i in 0..r {
+                for j in 1..c {
+                    s = s.max((m[(i, j)] - m[(i, j - 1)]).abs());
+                }
+            }
+            s
+        };
+        assert!(step(&new) < 0.5, "{}", step(&new));
+        assert!(step(&old) > 1.0);
+        // Nothing to fill: the smoothing itself.
+        let all = Array2::from_elem((r, c), true);
+        assert_eq!(
+            smooth_masked_reaching(&a, &all, sigma, 0.5),
+            smooth_masked(&a, &all, sigma)
+        );
     }
 
     #[test]
