@@ -81,6 +81,27 @@ pub fn smooth_masked(a: &Array2<f64>, valid: &Array2<bool>, sigma_px: f64) -> Ar
         .map_collect(|&n, &d| if d > 1e-9 { n / d } else { 0.0 })
 }
 
+/// Means of the valid pixels of `a` over `b` x `b` blocks (the last row and column of blocks
+/// may be partial), and which blocks hold any (0 where none).
+pub fn block_means(a: &Array2<f64>, valid: &Array2<bool>, b: usize) -> (Array2<f64>, Array2<bool>) {
+    let (r, c) = a.dim();
+    let b = b.max(1);
+    let (rb, cb) = (r.div_ceil(b), c.div_ceil(b));
+    let mut num = Array2::<f64>::zeros((rb, cb));
+    let mut den = Array2::<f64>::zeros((rb, cb));
+    for ((i, j), &v) in valid.indexed_iter() {
+        if v {
+            num[(i / b, j / b)] += a[(i, j)];
+            den[(i / b, j / b)] += 1.0;
+        }
+    }
+    let mean = Array2::from_shape_fn(
+        (rb, cb),
+        |q| if den[q] > 0.0 { num[q] / den[q] } else { 0.0 },
+    );
+    (mean, den.mapv(|w| w > 0.0))
+}
+
 /// [`smooth_masked`] with the pixels beyond the data's reach filled from afar: an invalid pixel
 /// at distance `d` (pixels) from the nearest valid one takes the masked smoothing at the
 /// length `max(sigma_px, alpha d)` (interpolated in log length between smoothings at `sigma_px`
@@ -120,21 +141,7 @@ pub fn smooth_masked_reaching(
         .map(|k| {
             let sig = sigma_px * 2f64.powi(k as i32);
             let b = ((sig / 4.0).floor() as usize).max(1);
-            let (rb, cb) = (r.div_ceil(b), c.div_ceil(b));
-            let mut num = Array2::<f64>::zeros((rb, cb));
-            let mut den = Array2::<f64>::zeros((rb, cb));
-            for ((i, j), &v) in valid.indexed_iter() {
-                if v {
-                    num[(i / b, j / b)] += a[(i, j)];
-                    den[(i / b, j / b)] += 1.0;
-                }
-            }
-            let vb = den.mapv(|w| w > 0.0);
-            let mb =
-                Array2::from_shape_fn(
-                    (rb, cb),
-                    |q| if den[q] > 0.0 { num[q] / den[q] } else { 0.0 },
-                );
+            let (mb, vb) = block_means(a, valid, b);
             let sm = smooth_masked(&mb, &vb, sig / b as f64);
             let half = 0.5 * (b as f64 - 1.0);
             far.iter()

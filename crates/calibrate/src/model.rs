@@ -217,22 +217,7 @@ pub fn local_height_map(
     // other covariates).
     let d = ((px / 4.0).floor() as usize).max(1);
     let (rc, cc) = (g.rows.div_ceil(d), g.cols.div_ceil(d));
-    let mut num = Array2::<f64>::zeros((rc, cc));
-    let mut den = Array2::<f64>::zeros((rc, cc));
-    for ((i, j), &v) in valid.indexed_iter() {
-        if v {
-            num[(i / d, j / d)] += flat[(i, j)];
-            den[(i / d, j / d)] += 1.0;
-        }
-    }
-    let valid_c = den.mapv(|w| w > 0.0);
-    let mean_c = Array2::from_shape_fn((rc, cc), |ij| {
-        if den[ij] > 0.0 {
-            num[ij] / den[ij]
-        } else {
-            0.0
-        }
-    });
+    let (mean_c, valid_c) = crate::grid::block_means(&flat, valid, d);
     let half = 0.5 * (d as f64 - 1.0);
     let gc = MapGrid::new(
         rc,

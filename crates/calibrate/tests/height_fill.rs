@@ -7,16 +7,53 @@
 
 use bonnetlab_calibrate::fill_error::{height_fill_errors, height_resolution_errors};
 use bonnetlab_calibrate::grid::{sample, smooth_masked};
-use bonnetlab_calibrate::model::plane_fit;
+use bonnetlab_calibrate::model::{plane_fit, plane_removed, Problem};
 use bonnetlab_calibrate::synth::{generate, InitialSurface, SynthConfig};
 use bonnetlab_surface::rng::Rng;
 use ndarray::Array2;
 
 fn round_and_square(seed: u64, noise: f64) -> (SynthConfig, SynthConfig) {
-    let square = SynthConfig::realistic(seed, 160, 100.0, InitialSurface::realistic_texture(2.2))
+    twin_configs(seed, 160, 2.2, noise, 80.0)
+}
+
+/// A run on a round aperture of `aperture_mm` and its square twin (the same surface, path and
+/// noise, measured over the whole 100 mm part): `n`^2 maps, a power-law surface of 1-D exponent
+/// `beta`.
+fn twin_configs(
+    seed: u64,
+    n: usize,
+    beta: f64,
+    noise: f64,
+    aperture_mm: f64,
+) -> (SynthConfig, SynthConfig) {
+    let square = SynthConfig::realistic(seed, n, 100.0, InitialSurface::realistic_texture(beta))
         .with_noise_nm(noise, noise);
-    let round = square.clone().with_round_aperture(true, 80.0);
+    let round = square.clone().with_round_aperture(true, aperture_mm);
     (round, square)
+}
+
+/// The twins' problems (round first).
+fn twin_problems((round, square): (SynthConfig, SynthConfig)) -> (Problem, Problem) {
+    let pr = generate(&round).expect("round").problem().expect("problem");
+    let ps = generate(&square)
+        .expect("square")
+        .problem()
+        .expect("problem");
+    (pr, ps)
+}
+
+/// The true local height over `sigma_mm` about the plane the round run's model takes (over its
+/// aperture's pixels), from the square twin's map: the model's smoothing over a map with no
+/// holes.
+fn true_local_height(pr: &Problem, ps: &Problem, sigma_mm: f64) -> Array2<f64> {
+    let g = &pr.grid;
+    let [pz, px, py] = plane_fit(g, &ps.before, &pr.before_valid);
+    let (cx, cy) = g.centre_mm();
+    let flat = Array2::from_shape_fn(ps.before.dim(), |(i, j)| {
+        ps.before[(i, j)] - pz - px * (g.x_mm(j) - cx) - py * (g.y_mm(i) - cy)
+    });
+    let all = Array2::from_elem(flat.dim(), true);
+    smooth_masked(&flat, &all, sigma_mm / g.dx_mm)
 }
 
 #[test]
@@ -58,25 +95,13 @@ fn the_valid_plane_offset_is_the_calibrations_plane_over_the_aperture_less_over_
 fn fill_errors_vanish_inside_the_data_and_match_the_true_corners_outside() {
     // Three power-law surfaces; the truth of the corners from each run's square twin.
     for seed in [3u64, 8, 21] {
-        let (round, square) = round_and_square(seed, 1.0);
-        let pr = generate(&round).expect("round").problem().expect("problem");
-        let ps = generate(&square)
-            .expect("square")
-            .problem()
-            .expect("problem");
+        let (pr, ps) = twin_problems(round_and_square(seed, 1.0));
         let g = &pr.grid;
         let sigma_mm = 2.0 * g.dx_mm;
         let draws = height_fill_errors(&pr, sigma_mm, 16);
         assert_eq!(draws.len(), 16);
-        // The true local height about the same plane the model takes (over the aperture's
-        // pixels), from the square twin's map: the model's smoothing over a map with no holes.
-        let [pz, px, py] = plane_fit(g, &ps.before, &pr.before_valid);
+        let truth = true_local_height(&pr, &ps, sigma_mm);
         let (cx, cy) = g.centre_mm();
-        let flat = Array2::from_shape_fn(ps.before.dim(), |(i, j)| {
-            ps.before[(i, j)] - pz - px * (g.x_mm(j) - cx) - py * (g.y_mm(i) - cy)
-        });
-        let all = Array2::from_elem(flat.dim(), true);
-        let truth = smooth_masked(&flat, &all, sigma_mm / g.dx_mm);
         let model = pr.local_height(sigma_mm);
         let s = &pr.samples;
         let r_ap = 40.0;
@@ -135,27 +160,13 @@ fn the_fill_continues_the_surface_past_a_round_rim() {
     // footprint carries the fill into the measured removal; and far out, where neither knows.
     let mut pooled = [(0.0f64, 0.0f64, 0usize); 2];
     for (seed, beta) in [(3u64, 1.8), (8, 2.2), (21, 2.6), (13, 2.2)] {
-        let square =
-            SynthConfig::realistic(seed, 200, 100.0, InitialSurface::realistic_texture(beta))
-                .with_noise_nm(1.0, 1.0);
-        let round = square.clone().with_round_aperture(true, 90.0);
-        let pr = generate(&round).expect("round").problem().expect("problem");
-        let ps = generate(&square)
-            .expect("square")
-            .problem()
-            .expect("problem");
+        let (pr, ps) = twin_problems(twin_configs(seed, 200, beta, 1.0, 90.0));
         let g = &pr.grid;
         let sigma_mm = 2.0 * g.dx_mm;
-        let [pz, px, py] = plane_fit(g, &ps.before, &pr.before_valid);
+        let truth = true_local_height(&pr, &ps, sigma_mm);
+        let flat = plane_removed(g, &pr.before, &pr.before_valid);
+        let stopping = smooth_masked(&flat, &pr.before_valid, sigma_mm / g.dx_mm);
         let (cx, cy) = g.centre_mm();
-        let flat = |m: &Array2<f64>| {
-            Array2::from_shape_fn(m.dim(), |(i, j)| {
-                m[(i, j)] - pz - px * (g.x_mm(j) - cx) - py * (g.y_mm(i) - cy)
-            })
-        };
-        let all = Array2::from_elem(ps.before.dim(), true);
-        let truth = smooth_masked(&flat(&ps.before), &all, sigma_mm / g.dx_mm);
-        let stopping = smooth_masked(&flat(&pr.before), &pr.before_valid, sigma_mm / g.dx_mm);
         let model = pr.local_height(sigma_mm);
         let s = &pr.samples;
         let on_map = |k: usize| {
