@@ -8,9 +8,9 @@
 //! (`model::local_height_at`: the measured heights smoothed at a length growing with the
 //! distance from them, `grid::smooth_masked_reaching`; the border's value off the map); the
 //! true height there differs from the fill by an amount the data cannot tell, and a rate that
-//! follows the height is then fitted to a covariate that is wrong on those samples. That error is systematic for one run (every
-//! hold-out block sees the same fill), so neither the classical nor the block-robust covariance
-//! contains it.
+//! follows the height is then fitted to a covariate that is wrong on those samples. That error
+//! is systematic for one run (every hold-out block sees the same fill), so neither the
+//! classical nor the block-robust covariance contains it.
 //!
 //! Its size is drawn, not assumed: a surrogate surface with the measured map's own spectrum
 //! (the periodogram of the plane-removed map over its valid pixels, with random complex normal
