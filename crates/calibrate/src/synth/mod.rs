@@ -427,6 +427,104 @@ impl SynthRun {
     }
 }
 
+/// A run on an instrument's own measurements: `cfg`'s path, spot and exactly deposited removal
+/// on the grid of `before`, with the before map `before` as read and the after map `after` less
+/// the run's true removal (valid where `after` is). The measurement error is then the
+/// instrument's (its pixel-scale noise and the smooth drift between two measurements), not a
+/// model of it; `cfg`'s own noise, dropouts and set-up terms are not used, and the run's
+/// `true_noise_floor_nm` is the white floor of the two measurements' difference. `cfg` must be on
+/// `before`'s grid ([`SynthConfig::on_grid_of`]) and must not inject a registration (the maps
+/// are not moved), and `after` must share that grid.
+pub fn on_measured_maps(
+    cfg: &SynthConfig,
+    before: &Surface,
+    after: &Surface,
+) -> Result<SynthRun, CalibrateError> {
+    if before.dim() != (cfg.rows, cfg.cols) || after.dim() != before.dim() {
+        return Err(CalibrateError::InvalidInput(format!(
+            "measured maps {:?} and {:?} against a run of {} x {} pixels: they must share its grid",
+            before.dim(),
+            after.dim(),
+            cfg.rows,
+            cfg.cols
+        )));
+    }
+    if cfg
+        .effects
+        .iter()
+        .any(|e| matches!(e, Injected::Registration { .. }))
+    {
+        return Err(CalibrateError::InvalidInput(
+            "a run on measured maps cannot inject a registration (the maps are not moved)".into(),
+        ));
+    }
+    let run = generate(cfg)?;
+    let swap = |on: &Surface, h: Array2<f64>, valid: &Array2<bool>| {
+        on.with_heights(h)
+            .and_then(|s| s.with_valid(valid.clone()))
+            .map_err(CalibrateError::from)
+    };
+    let before_s = swap(&run.before, before.heights_nm().clone(), before.valid())?;
+    let after_s = swap(
+        &run.after,
+        after.heights_nm() - &run.true_removal_nm,
+        after.valid(),
+    )?;
+    // The white floor of the two measurements' own difference (the pixel-scale estimator of
+    // `noise`, on maps no model touched); the smooth drift between them is not in it.
+    let floor = crate::noise::removal_noise_floor(
+        before.heights_nm(),
+        before.valid(),
+        after.heights_nm(),
+        after.valid(),
+    )
+    .unwrap_or(0.0);
+    Ok(SynthRun {
+        before: before_s,
+        after: after_s,
+        true_noise_floor_nm: floor,
+        ..run
+    })
+}
+
+impl SynthConfig {
+    /// [`SynthConfig::realistic`] on the grid of a measured map `m` (its rows, columns and
+    /// pixel), raster pitch `pitch_mm`, with no noise, dropouts or set-up terms of its own: the
+    /// configuration of [`on_measured_maps`]. The initial surface the dwell is designed from is
+    /// the realistic texture (exponent 2.2).
+    pub fn on_grid_of(
+        m: &Surface,
+        seed: u64,
+        pitch_mm: f64,
+    ) -> Result<SynthConfig, CalibrateError> {
+        let (rows, cols) = m.dim();
+        let (dx, dy) = m.pixel_mm("a run on measured maps")?;
+        if (dx - dy).abs() > 1e-9 * dx {
+            return Err(CalibrateError::InvalidInput(format!(
+                "a run on measured maps needs square pixels, got {dx} x {dy} mm"
+            )));
+        }
+        Ok(SynthConfig {
+            rows,
+            cols,
+            pixel_mm: dx,
+            pitch_mm,
+            noise_nm: 0.0,
+            noise_after_nm: Some(0.0),
+            dropout_fraction: 0.0,
+            dropout_discs: 0,
+            setup_tilt_nm: 0.0,
+            setup_piston_nm: 0.0,
+            ..SynthConfig::realistic(
+                seed,
+                rows,
+                dx * rows as f64,
+                InitialSurface::realistic_texture(2.2),
+            )
+        })
+    }
+}
+
 /// Independent random streams of one run.
 fn stream(seed: u64, purpose: u64) -> Rng {
     Rng::new(seed ^ purpose.wrapping_mul(0x9E37_79B9_7F4A_7C15))
