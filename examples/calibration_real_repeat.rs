@@ -23,6 +23,8 @@ use std::time::Instant;
 
 use bonnetlab::calibrate::run::{calibrate, Options};
 use bonnetlab::calibrate::synth::{on_measured_maps, Injected, SynthConfig};
+use bonnetlab::surface::form::{remove_terms, Term};
+use bonnetlab::surface::stats::height_stats;
 use bonnetlab::surface::Surface;
 
 /// The series, in the order of measurement.
@@ -81,42 +83,12 @@ fn injected(kind: &str) -> Result<Vec<Injected>, String> {
     })
 }
 
-/// RMS (nm) of `b - a` over the pixels valid in both, less its least-squares plane.
+/// RMS (nm) of `b - a` over the pixels valid in both, less its least-squares plane (the
+/// surface crate's form removal and height statistics).
 fn difference_rms(a: &Surface, b: &Surface) -> Option<f64> {
     let d = b.difference(a).ok()?;
-    let (h, v) = (d.heights_nm(), d.valid());
-    let pts: Vec<(f64, f64, f64)> = v
-        .indexed_iter()
-        .filter(|(_, ok)| **ok)
-        .map(|((i, j), _)| (j as f64, i as f64, h[(i, j)]))
-        .collect();
-    let n = pts.len() as f64;
-    if n < 3.0 {
-        return None;
-    }
-    let (mx, my, mz) = pts.iter().fold((0.0, 0.0, 0.0), |s, p| {
-        (s.0 + p.0 / n, s.1 + p.1 / n, s.2 + p.2 / n)
-    });
-    let (mut sxx, mut syy, mut sxy, mut sxz, mut syz) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for &(x, y, z) in &pts {
-        let (x, y, z) = (x - mx, y - my, z - mz);
-        sxx += x * x;
-        syy += y * y;
-        sxy += x * y;
-        sxz += x * z;
-        syz += y * z;
-    }
-    let det = sxx * syy - sxy * sxy;
-    let (bx, by) = if det.abs() > 0.0 {
-        ((sxz * syy - syz * sxy) / det, (syz * sxx - sxz * sxy) / det)
-    } else {
-        (0.0, 0.0)
-    };
-    let ss: f64 = pts
-        .iter()
-        .map(|&(x, y, z)| (z - mz - bx * (x - mx) - by * (y - my)).powi(2))
-        .sum();
-    Some((ss / n).sqrt())
+    let (flat, _) = remove_terms(&d, &[Term::Piston, Term::Tilt]).ok()?;
+    height_stats(&flat).ok().map(|h| h.rms_nm)
 }
 
 fn main() -> ExitCode {
