@@ -13,7 +13,7 @@ use crate::error::CalibrateError;
 use crate::model::{fit, Effect, Eval, Fit, Param, Problem};
 use crate::noise::{band_noise_floor, initial_noise_floor};
 use crate::refine::refine;
-use crate::selection::{base_gram, base_gram_with, holdout, split, Score, Z_MIN};
+use crate::selection::{base_gram, holdout, split, Score};
 use crate::unexplained::{self, Unexplained};
 
 #[derive(Debug, Clone)]
@@ -106,15 +106,8 @@ pub const STRONG_CORRELATION: f64 = 0.8;
 #[derive(Debug, Clone, Serialize)]
 pub struct CandidateScore {
     pub key: String,
-    /// Held-out z; for a rate candidate significant on the data, the smaller of it and
-    /// `z_beyond_smooth`.
     pub z: f64,
     pub heldout_reduction_fraction: f64,
-    /// A rate candidate's held-out z beyond a smooth additive difference between the two
-    /// measurements (`fallback::smooth_additive_columns` says why); scored for rate candidates
-    /// significant on the data.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub z_beyond_smooth: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -455,8 +448,6 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     // nothing left that an effect could be told apart from (a noise-free run otherwise accepts
     // a 0.1 % TIF scale or a 0.07 um path wiggle standing for discretisation error).
     let trust = noise.hypot(MODEL_ACCURACY * fm.rms());
-    // The smooth additive map rate candidates are scored beyond, built on first need.
-    let smooth_cols: std::sync::OnceLock<Vec<Vec<f64>>> = std::sync::OnceLock::new();
     for _ in 0..opts.max_effects {
         if f.rms() <= trust {
             break;
@@ -480,58 +471,6 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             .par_iter()
             .map(|c| holdout(&ev, &c.extra, &sp, &bg))
             .collect();
-        // Rate candidates significant on the data, scored again beyond a smooth additive
-        // difference between the measurements (`fallback::smooth_additive_columns` says why).
-        let rate_like = |c: &Candidate| c.kind.starts_with("rate_");
-        let to_check = |c: &Candidate, s: &Score| rate_like(c) && s.delta > 0.0 && s.z >= Z_MIN;
-        let mut beyond_smooth: Vec<Option<f64>> = vec![None; cands.len()];
-        let scores: Vec<Score> = if cands.iter().zip(&scores).any(|(c, s)| to_check(c, s)) {
-            let smooth = smooth_cols.get_or_init(|| fallback::smooth_additive_columns(p));
-            if smooth.is_empty() {
-                scores
-            } else {
-                // What the smooth map alone takes from the held-out sum of squares.
-                let alone = holdout(&ev, smooth, &sp, &bg);
-                let bg_s = base_gram_with(&ev, smooth, &sp);
-                let out: Vec<(Score, Option<f64>)> = cands
-                    .par_iter()
-                    .zip(scores)
-                    .map(|(c, s)| {
-                        if !to_check(c, &s) {
-                            return (s, None);
-                        }
-                        let b = holdout(&ev, &c.extra, &sp, &bg_s);
-                        // A library kind (a named mechanism of few parameters) that predicts
-                        // the held-out data better than the smooth map does keeps its score;
-                        // the fallback's generic maps, lines and windows do not.
-                        if !fallback::is_fallback(c.kind) && s.delta > alone.delta {
-                            return (s, Some(b.z));
-                        }
-                        let kept = Score {
-                            delta: s.delta.min(b.delta),
-                            z: s.z.min(b.z),
-                            fraction: s.fraction.min(b.fraction),
-                        };
-                        (kept, Some(b.z))
-                    })
-                    .collect();
-                let (sc, bz): (Vec<Score>, Vec<Option<f64>>) = out.into_iter().unzip();
-                beyond_smooth = bz;
-                sc
-            }
-        } else {
-            scores
-        };
-        let smooth_z: Vec<(String, f64)> = cands
-            .iter()
-            .zip(&beyond_smooth)
-            .filter_map(|(c, z)| z.map(|z| (c.key.clone(), z)))
-            .collect();
-        if trace {
-            for (k, z) in &smooth_z {
-                eprintln!("beyond a smooth additive map {k}: z {z:.2}");
-            }
-        }
         if trace {
             for (c, s) in cands.iter().zip(&scores) {
                 eprintln!("score {}: z {:.2} reduction {:.5}", c.key, s.z, s.fraction);
@@ -611,7 +550,6 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                     key: c.key.clone(),
                     z: s.z,
                     heldout_reduction_fraction: s.fraction,
-                    z_beyond_smooth: smooth_z.iter().find(|(k, _)| *k == c.key).map(|(_, z)| *z),
                 })
                 .collect(),
         };
