@@ -166,7 +166,8 @@ fn one_run(
     let t = Instant::now();
     let cal = calibrate(&p, &Options::default()).map_err(|e| e.to_string())?;
     let wall = t.elapsed().as_secs_f64();
-    let pair = difference_rms(before, after).unwrap_or(f64::NAN);
+    let nm = |v: Option<f64>| v.map_or("-".to_string(), |x| format!("{x:.3}"));
+    let pair = nm(difference_rms(before, after));
     let effects: Vec<String> = cal
         .effects
         .iter()
@@ -179,14 +180,14 @@ fn one_run(
             format!("{} (z {:.1}; {})", e.kind, e.significance, nums.join(", "))
         })
         .collect();
-    let process = cal
+    let process = nm(cal
         .final_
         .bands
         .iter()
         .find(|b| b.band == "process")
-        .map_or(f64::NAN, |b| b.rms_nm);
+        .map(|b| b.rms_nm));
     Ok(format!(
-        "{ib}->{ia}: pair differs by {pair:.3} nm RMS (plane removed); floor {:.3} nm; baseline {:.3} -> final {:.3} nm (process band {process:.3}); accepted [{}]; {} unexplained; {wall:.1} s",
+        "{ib}->{ia}: pair differs by {pair} nm RMS (plane removed); floor {:.3} nm; baseline {:.3} -> final {:.3} nm (process band {process}); accepted [{}]; {} unexplained; {wall:.1} s",
         cal.noise_floor_rms_nm,
         cal.baseline.residual_rms_nm,
         cal.final_.residual_rms_nm,
