@@ -13,7 +13,7 @@ use crate::error::CalibrateError;
 use crate::model::{fit, Effect, Eval, Fit, Param, Problem};
 use crate::noise::{band_noise_floor, initial_noise_floor};
 use crate::refine::refine;
-use crate::selection::{base_gram, holdout, split, Score};
+use crate::selection::{base_gram, base_gram_with, holdout, split, Score, Z_MIN};
 use crate::unexplained::{self, Unexplained};
 
 #[derive(Debug, Clone)]
@@ -106,8 +106,16 @@ pub const STRONG_CORRELATION: f64 = 0.8;
 #[derive(Debug, Clone, Serialize)]
 pub struct CandidateScore {
     pub key: String,
+    /// Held-out z; for a rate candidate significant on the data, the smaller of it and
+    /// `z_beyond_smooth` unless it is a library kind that stands beyond the smooth map
+    /// (`fallback::smooth_additive_columns` says when).
     pub z: f64,
     pub heldout_reduction_fraction: f64,
+    /// A rate candidate's held-out z beyond a smooth additive difference between the two
+    /// measurements (`fallback::smooth_additive_columns` says why); scored for rate candidates
+    /// significant on the data (but the map's refinement).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub z_beyond_smooth: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -448,6 +456,8 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     // nothing left that an effect could be told apart from (a noise-free run otherwise accepts
     // a 0.1 % TIF scale or a 0.07 um path wiggle standing for discretisation error).
     let trust = noise.hypot(MODEL_ACCURACY * fm.rms());
+    // The smooth additive map rate candidates are scored beyond, built on first need.
+    let smooth_cols: std::sync::OnceLock<Vec<Vec<f64>>> = std::sync::OnceLock::new();
     for _ in 0..opts.max_effects {
         if f.rms() <= trust {
             break;
@@ -471,6 +481,80 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             .par_iter()
             .map(|c| holdout(&ev, &c.extra, &sp, &bg))
             .collect();
+        // Rate candidates significant on the data, scored again beyond a smooth additive
+        // difference between the measurements (`fallback::smooth_additive_columns` says why).
+        // The map's refinement is not: it only completes a map that already passed.
+        let to_check = |c: &Candidate, s: &Score| {
+            c.kind.starts_with("rate_")
+                && c.kind != fallback::Basis::MapFine.kind()
+                && s.delta > 0.0
+                && s.z >= Z_MIN
+        };
+        let mut beyond_smooth: Vec<Option<f64>> = vec![None; cands.len()];
+        let scores: Vec<Score> = if cands.iter().zip(&scores).any(|(c, s)| to_check(c, s)) {
+            let smooth = smooth_cols.get_or_init(|| fallback::smooth_additive_columns(p));
+            if smooth.is_empty() {
+                scores
+            } else {
+                // What the smooth map alone takes from the held-out sum of squares.
+                let alone = holdout(&ev, smooth, &sp, &bg);
+                let bg_s = base_gram_with(&ev, smooth, &sp);
+                let beyond: Vec<Option<Score>> = cands
+                    .par_iter()
+                    .zip(&scores)
+                    .map(|(c, s)| to_check(c, s).then(|| holdout(&ev, &c.extra, &sp, &bg_s)))
+                    .collect();
+                // A library kind is a named mechanism of few parameters, possibly offered as
+                // several variants under one key (the height's smoothing lengths). Its variant
+                // that the data score best decides for all: if it predicts the held-out data
+                // better than the smooth map alone, or stays significant beyond it, every
+                // variant keeps its own score, so the data still choose among them. The
+                // fallback's generic maps, lines and windows always keep the smaller score.
+                let mut best: Vec<(&str, f64, bool)> = Vec::new();
+                for ((c, s), b) in cands.iter().zip(&scores).zip(&beyond) {
+                    let Some(b) = b else { continue };
+                    if fallback::is_fallback(c.kind) {
+                        continue;
+                    }
+                    let stands = s.delta > alone.delta || b.z >= Z_MIN;
+                    match best.iter_mut().find(|(k, _, _)| *k == c.key) {
+                        Some(e) if s.z > e.1 => *e = (c.key.as_str(), s.z, stands),
+                        Some(_) => {}
+                        None => best.push((c.key.as_str(), s.z, stands)),
+                    }
+                }
+                let stands = |c: &Candidate| best.iter().any(|(k, _, st)| *k == c.key && *st);
+                let out: Vec<(Score, Option<f64>)> = cands
+                    .iter()
+                    .zip(scores)
+                    .zip(&beyond)
+                    .map(|((c, s), b)| match b {
+                        None => (s, None),
+                        Some(b) if stands(c) => (s, Some(b.z)),
+                        Some(b) => (
+                            Score {
+                                delta: s.delta.min(b.delta),
+                                z: s.z.min(b.z),
+                                fraction: s.fraction.min(b.fraction),
+                            },
+                            Some(b.z),
+                        ),
+                    })
+                    .collect();
+                let (sc, bz): (Vec<Score>, Vec<Option<f64>>) = out.into_iter().unzip();
+                beyond_smooth = bz;
+                sc
+            }
+        } else {
+            scores
+        };
+        if trace {
+            for (c, z) in cands.iter().zip(&beyond_smooth) {
+                if let Some(z) = z {
+                    eprintln!("beyond a smooth additive map {}: z {z:.2}", c.key);
+                }
+            }
+        }
         if trace {
             for (c, s) in cands.iter().zip(&scores) {
                 eprintln!("score {}: z {:.2} reduction {:.5}", c.key, s.z, s.fraction);
@@ -478,8 +562,10 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         }
         // Kinds no library entry names stay only past their stricter held-out bar (those held
         // back are kept for the report of structure below the bars, `below_bar`).
-        let (kept, held): (Vec<Scored>, Vec<Scored>) =
-            cands.into_iter().zip(scores).partition(|(c, s)| {
+        let keep: Vec<bool> = cands
+            .iter()
+            .zip(&scores)
+            .map(|(c, s)| {
                 if !fallback::is_fallback(c.kind) {
                     return true;
                 }
@@ -493,8 +579,21 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                     );
                 }
                 fallback::passes(s, c.extra.len())
-            });
-        let (mut cands, mut scores): (Vec<Candidate>, Vec<Score>) = kept.into_iter().unzip();
+            })
+            .collect();
+        let beyond_smooth: Vec<Option<f64>> = beyond_smooth
+            .into_iter()
+            .zip(&keep)
+            .filter_map(|(z, k)| k.then_some(z))
+            .collect();
+        let (kept, held): (Vec<(Scored, bool)>, Vec<(Scored, bool)>) = cands
+            .into_iter()
+            .zip(scores)
+            .zip(keep)
+            .partition(|(_, k)| *k);
+        let held: Vec<Scored> = held.into_iter().map(|(cs, _)| cs).collect();
+        let (mut cands, mut scores): (Vec<Candidate>, Vec<Score>) =
+            kept.into_iter().map(|(cs, _)| cs).unzip();
         // The scan of the TIF scale (`tif_scale::scanned`) costs a forward model per scale
         // scanned. It is skipped while another kind's candidate takes at least
         // SCAN_SKIP_SHARE of the excess over the noise floor on held-out data and the
@@ -546,10 +645,12 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             candidates: cands
                 .iter()
                 .zip(&scores)
-                .map(|(c, s)| CandidateScore {
+                .zip(&beyond_smooth)
+                .map(|((c, s), zb)| CandidateScore {
                     key: c.key.clone(),
                     z: s.z,
                     heldout_reduction_fraction: s.fraction,
+                    z_beyond_smooth: *zb,
                 })
                 .collect(),
         };

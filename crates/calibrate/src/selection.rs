@@ -74,7 +74,13 @@ pub struct BaseGram {
 }
 
 pub fn base_gram(ev: &Eval, sp: &Split) -> BaseGram {
-    let cols: Vec<&[f64]> = ev.cols.iter().map(|c| c.as_slice()).collect();
+    base_gram_with(ev, &[], sp)
+}
+
+/// [`base_gram`] with `more` columns in the base beside the current model's (a nuisance the
+/// candidates are then scored beyond: `run`'s smooth additive difference).
+pub fn base_gram_with(ev: &Eval, more: &[Vec<f64>], sp: &Split) -> BaseGram {
+    let cols: Vec<&[f64]> = ev.cols.iter().chain(more).map(|c| c.as_slice()).collect();
     let sa: Vec<bool> = sp.half_a.clone();
     let sb: Vec<bool> = sp.half_a.iter().map(|v| !v).collect();
     let (ga, ra) = lsq::gram(&cols, &ev.m, &ev.w, Some(&sa));
@@ -162,7 +168,9 @@ const BLOCK: usize = 512;
 // Index loops fill a symmetric Gram matrix; iterators would hide the (row, column) pairing.
 #[allow(clippy::needless_range_loop)]
 pub fn holdout(ev: &Eval, extra: &[Vec<f64>], sp: &Split, bg: &BaseGram) -> Score {
-    let nb = ev.cols.len();
+    // The base's columns: the current model's, and any `base_gram_with` added.
+    let nb = bg.r[0].len();
+    debug_assert!(nb >= ev.cols.len());
     let ne = extra.len();
     let mut d = vec![0.0; sp.n_blocks];
     let mut sse_base = 0.0;

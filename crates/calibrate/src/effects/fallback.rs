@@ -476,6 +476,62 @@ fn map_knots(p: &Problem) -> Option<(f64, f64, usize, usize, f64, f64)> {
     Some((x0, y0, nx, ny, hx, hy))
 }
 
+/// The rate map's bilinear hats (its knot grid, [`map_knots`]) as a smooth map added to the
+/// measured removal, evaluated at the analysis pixels (`p.idx`): a smooth difference between
+/// the two measurements that no rate causes. Knots whose hat covers less than `MIN_SUPPORT` of
+/// the median knot's pixel weight are left out (a hat on a few rim pixels is a local fit of
+/// them). Empty without a map grid.
+///
+/// Why `run` scores rate candidates beyond it. A real interferometer's error is not white:
+/// three measurements of one flat a minute or so apart (`01_801B`, `02_801B`, `04_801B` in
+/// `../shared/data`, 0.2457 mm pixels, a 97 mm aperture) differ pairwise by 0.87-1.64 nm RMS
+/// after a plane, against a pixel-scale floor of 0.16-0.20 nm; the difference is smooth (air,
+/// drift, alignment) and spread over many low orders (0.41-0.47 nm remain after 15
+/// Zernike-like terms). The hold-out takes blocks a tenth of the map across as independent,
+/// and a smooth error is predictable from the neighbouring blocks, so it passes. A rate effect
+/// multiplies the removal, which is often nearly uniform (78 nm mean, 15 nm RMS in those
+/// runs), so a smooth rate change and a smooth additive error look alike: on runs built from
+/// two of those maps and an exactly deposited removal (`examples/calibration_real_repeat.rs`)
+/// the selection accepted a rate map of up to 15-20 % and its refinement in every one of 12
+/// runs with nothing injected. So a rate candidate (a kind named `rate_*`, but the map's
+/// refinement, which only completes a map that passed) significant on the data is scored
+/// again with these columns in the base. A fallback's candidate (generic maps, lines, windows
+/// of many parameters) keeps the smaller of the two scores. A library kind (a named mechanism
+/// of few parameters, possibly offered as several variants under one key: the height's
+/// smoothing lengths) is judged by its variant the data score best: if that one alone predicts
+/// the held-out data better than this smooth map does, or stays significant beyond it, all the
+/// kind's variants keep their own scores (so the data still choose among them); otherwise they
+/// too keep the smaller. The smooth map is not added to the model: what it would take stays in
+/// the residual and is reported there (`unexplained`).
+pub fn smooth_additive_columns(p: &Problem) -> Vec<Vec<f64>> {
+    let Some((x0, y0, nx, ny, hx, hy)) = map_knots(p) else {
+        return Vec::new();
+    };
+    let g = &p.grid;
+    let hat = |v: f64, c: f64, h: f64| (1.0 - ((v - c) / h).abs()).max(0.0);
+    let mut cols: Vec<Vec<f64>> = Vec::with_capacity(nx * ny);
+    for j in 0..ny {
+        for i in 0..nx {
+            let (cx, cy) = (x0 + i as f64 * hx, y0 + j as f64 * hy);
+            cols.push(
+                p.idx
+                    .iter()
+                    .map(|&k| hat(g.x_mm(k % g.cols), cx, hx) * hat(g.y_mm(k / g.cols), cy, hy))
+                    .collect(),
+            );
+        }
+    }
+    let weight: Vec<f64> = cols.iter().map(|c| c.iter().sum()).collect();
+    let mut sorted = weight.clone();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    cols.into_iter()
+        .zip(weight)
+        .filter(|(_, w)| *w > 0.0 && *w >= MIN_SUPPORT * median)
+        .map(|(c, _)| c)
+        .collect()
+}
+
 /// Bilinear hats at every sample, one per knot `(i, j)` of the `n.0 x n.1` grid from `origin`
 /// with spacings `h` (row by row) that `keep` admits, and the knots' positions (mm).
 type KnotHats = (Vec<Vec<f64>>, Vec<(f64, f64)>);
