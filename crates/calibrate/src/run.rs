@@ -586,14 +586,19 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             .zip(&keep)
             .filter_map(|(z, k)| k.then_some(z))
             .collect();
-        let (kept, held): (Vec<(Scored, bool)>, Vec<(Scored, bool)>) = cands
+        let mut held: Vec<Scored> = Vec::new();
+        let (mut cands, mut scores): (Vec<Candidate>, Vec<Score>) = cands
             .into_iter()
             .zip(scores)
             .zip(keep)
-            .partition(|(_, k)| *k);
-        let held: Vec<Scored> = held.into_iter().map(|(cs, _)| cs).collect();
-        let (mut cands, mut scores): (Vec<Candidate>, Vec<Score>) =
-            kept.into_iter().map(|(cs, _)| cs).unzip();
+            .filter_map(|(cs, k)| {
+                if !k {
+                    held.push(cs);
+                    return None;
+                }
+                Some(cs)
+            })
+            .unzip();
         // The scan of the TIF scale (`tif_scale::scanned`) costs a forward model per scale
         // scanned. It is skipped while another kind's candidate takes at least
         // SCAN_SKIP_SHARE of the excess over the noise floor on held-out data and the
