@@ -448,7 +448,9 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     let mut alternatives: Vec<(String, Vec<Alternative>)> = Vec::new();
     // The candidates and scores of the round that ended the selection with nothing to accept,
     // and how many effects the model held then.
-    let mut last_scored: Option<(Vec<Scored>, usize)> = None;
+    // Beside each, its score on the data and its z beyond the smooth additive map when the
+    // smooth check lowered it (`fallback::smooth_additive_columns`).
+    let mut last_scored: Option<(Vec<Scored>, Vec<Demoted>, usize)> = None;
     stage("set-up (fit without effects, floor, hold-out split)");
     let t0 = std::time::Instant::now();
     // What the model can be trusted to: the noise floor and the forward model's own accuracy
@@ -491,6 +493,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                 && s.z >= Z_MIN
         };
         let mut beyond_smooth: Vec<Option<f64>> = vec![None; cands.len()];
+        let mut demoted: Vec<Demoted> = vec![None; cands.len()];
         let scores: Vec<Score> = if cands.iter().zip(&scores).any(|(c, s)| to_check(c, s)) {
             let smooth = smooth_cols.get_or_init(|| fallback::smooth_additive_columns(p));
             if smooth.is_empty() {
@@ -524,25 +527,26 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                     }
                 }
                 let stands = |c: &Candidate| best.iter().any(|(k, _, st)| *k == c.key && *st);
-                let out: Vec<(Score, Option<f64>)> = cands
-                    .iter()
-                    .zip(scores)
-                    .zip(&beyond)
-                    .map(|((c, s), b)| match b {
-                        None => (s, None),
-                        Some(b) if stands(c) => (s, Some(b.z)),
-                        Some(b) => (
-                            Score {
-                                delta: s.delta.min(b.delta),
-                                z: s.z.min(b.z),
-                                fraction: s.fraction.min(b.fraction),
-                            },
-                            Some(b.z),
-                        ),
-                    })
-                    .collect();
-                let (sc, bz): (Vec<Score>, Vec<Option<f64>>) = out.into_iter().unzip();
-                beyond_smooth = bz;
+                let mut sc = Vec::with_capacity(cands.len());
+                for (i, ((c, s), b)) in cands.iter().zip(scores).zip(&beyond).enumerate() {
+                    let Some(b) = b else {
+                        sc.push(s);
+                        continue;
+                    };
+                    beyond_smooth[i] = Some(b.z);
+                    if stands(c) {
+                        sc.push(s);
+                        continue;
+                    }
+                    if b.z < s.z {
+                        demoted[i] = Some((s, b.z));
+                    }
+                    sc.push(Score {
+                        delta: s.delta.min(b.delta),
+                        z: s.z.min(b.z),
+                        fraction: s.fraction.min(b.fraction),
+                    });
+                }
                 sc
             }
         } else {
@@ -586,6 +590,12 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             .zip(&keep)
             .filter_map(|(z, k)| k.then_some(z))
             .collect();
+        // The demotions in the order `last_scored` lists the candidates: kept, then held.
+        let demoted_order: Vec<Demoted> = {
+            let kept = demoted.iter().zip(&keep).filter(|(_, k)| **k);
+            let held = demoted.iter().zip(&keep).filter(|(_, k)| !**k);
+            kept.chain(held).map(|(d, _)| *d).collect()
+        };
         let mut held: Vec<Scored> = Vec::new();
         let (mut cands, mut scores): (Vec<Candidate>, Vec<Score>) = cands
             .into_iter()
@@ -664,6 +674,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             rounds.push(round);
             last_scored = Some((
                 cands.into_iter().zip(scores).chain(held).collect(),
+                demoted_order,
                 effects.len(),
             ));
             break;
@@ -798,10 +809,10 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     // Structure the held-out test finds below the size bars, from the last round's scores
     // while the model is still the one scored there (the backward check dropped nothing).
     let below = match last_scored {
-        Some((scored, n)) if n == effects.len() => {
-            below_bar(p, opts, &effects, &ev, &f, scored, fm.rms())
+        Some((scored, demoted, n)) if n == effects.len() => {
+            below_bar(p, opts, &effects, &ev, &f, scored, demoted, fm.rms())
         }
-        _ => None,
+        _ => Vec::new(),
     };
     stage("structure below the bars");
     let lin = ev.linear(&f);
@@ -995,6 +1006,10 @@ fn effect_removal(
 /// A candidate with its held-out score.
 type Scored = (Candidate, Score);
 
+/// A candidate's score on the data and its held-out z beyond the smooth additive map, when the
+/// smooth check lowered its score (`fallback::smooth_additive_columns`).
+type Demoted = Option<(Score, f64)>;
+
 /// Held-out z from which a candidate under the size bars is reported (under `unexplained`,
 /// not added to the model). On the harness's 50 null runs (400^2, seed 1, session 28) the
 /// largest z of any candidate in the selection's last round was 3.2 (about 28 candidates a
@@ -1010,6 +1025,12 @@ const BELOW_BAR_TRIES: usize = 3;
 /// added removal reported as an `unexplained` entry. The model is not changed. Other kinds
 /// that reach the z are named beside it (one entry: they describe the same residual as often
 /// as not, a lag at the raster's lines and a rate per travel direction).
+///
+/// Beside it, at most one more entry: the strongest rate candidate whose score the smooth
+/// check lowered (`demoted`, aligned with `scored`) and whose z on the data reaches
+/// [`REPORT_Z`]: a rate change that the data cannot tell from a smooth difference between the
+/// two measurements, reported so (with both z) rather than dropped unsaid.
+#[allow(clippy::too_many_arguments)]
 fn below_bar(
     p: &Problem,
     opts: &Options,
@@ -1017,11 +1038,39 @@ fn below_bar(
     ev: &Eval,
     f: &Fit,
     scored: Vec<Scored>,
+    demoted: Vec<Demoted>,
     measured_rms_nm: f64,
-) -> Option<Unexplained> {
-    let mut found: Vec<Scored> = scored
+) -> Vec<Unexplained> {
+    // The strongest demoted rate candidate, scored on the data.
+    let drift_like = scored
+        .iter()
+        .zip(&demoted)
+        .filter_map(|((c, _), d)| d.map(|(s, zb)| (c, s, zb)))
+        .filter(|(_, s, _)| s.delta > 0.0 && s.z >= REPORT_Z)
+        .max_by(|a, b| a.1.z.total_cmp(&b.1.z).then_with(|| b.0.key.cmp(&a.0.key)));
+    let mut out: Vec<Unexplained> = drift_like
+        .and_then(|(c, s, zb)| {
+            let also = Vec::new();
+            refined_entry(
+                p,
+                opts,
+                effects,
+                ev,
+                f,
+                (c, &s),
+                also,
+                Some(zb),
+                measured_rms_nm,
+            )
+        })
         .into_iter()
-        .filter(|(_, s)| s.delta > 0.0 && s.z >= REPORT_Z)
+        .collect();
+    // The demoted ones are reported above, if at all.
+    let mut found: Vec<&Scored> = scored
+        .iter()
+        .zip(&demoted)
+        .filter(|((_, s), d)| d.is_none() && s.delta > 0.0 && s.z >= REPORT_Z)
+        .map(|(cs, _)| cs)
         .collect();
     found.sort_by(|a, b| b.1.z.total_cmp(&a.1.z).then_with(|| a.0.key.cmp(&b.0.key)));
     // The strongest candidate of each kind.
@@ -1032,72 +1081,105 @@ fn below_bar(
         new
     });
     for (i, (cand, score)) in found.iter().enumerate().take(BELOW_BAR_TRIES) {
+        let also = found
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .map(|(_, (c, s))| (c.key.clone(), s.z))
+            .collect();
         // A candidate whose refinement fails is passed over: the report is not worth the
         // calibration.
-        let refined = || -> Result<_, CalibrateError> {
-            let mut trial = effects.to_vec();
-            trial.push(if fallback::is_fallback(cand.kind) {
-                (cand.make)(&[], 1.0)
-            } else {
-                let fc = fit(ev, &cand.extra)?;
-                (cand.make)(&fc.coef[ev.cols.len()..], fc.coef[0])
-            });
-            let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
-            let lin = ev_t.linear(&f_t);
-            if f_t.rms() >= f.rms() || trial.iter().any(|e| e.implausible(p, &lin).is_some()) {
-                return Ok(None);
-            }
-            let all = model_values(&ev_t, &ev_t.names, &f_t.coef);
-            let added = effect_removal(p, &trial, trial.len() - 1, &ev_t, &f_t, &all)?;
-            Ok(Some((trial, ev_t, f_t, lin, added)))
-        };
-        let Ok(Some((trial, ev_t, f_t, lin, added))) = refined() else {
-            continue;
-        };
-        let (_, valid) = p.expand(&f_t.resid, &ev_t.w);
-        let e = &trial[trial.len() - 1];
-        let params: Vec<(String, Param)> = e.params(&lin);
-        let summary = params
-            .iter()
-            .find_map(|(n, v)| match v {
-                Param::Text(t) if n == "summary" => Some(t.clone()),
-                _ => None,
-            })
-            .unwrap_or_else(|| {
-                params
-                    .iter()
-                    .filter_map(|(n, v)| match v {
-                        Param::Num(x) => Some(format!("{n} {x:.4}")),
-                        Param::Text(t) => Some(format!("{n} {t}")),
-                        Param::List(_) => None,
-                    })
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            });
-        let what = unexplained::BelowBar {
-            kind: e.kind().into(),
-            key: cand.key.clone(),
-            heldout_z: score.z,
-            heldout_reduction_fraction: score.fraction,
-            params: params
-                .iter()
-                .map(|(n, v)| (n.clone(), param_value(v)))
-                .collect(),
-            residual_rms_if_added_nm: f_t.rms(),
-            also: found
-                .iter()
-                .enumerate()
-                .filter(|(j, _)| *j != i)
-                .map(|(_, (c, s))| (c.key.clone(), s.z))
-                .collect(),
-            peak_per_mm: 0.0,
-            model_accuracy_nm: MODEL_ACCURACY * measured_rms_nm,
-        };
-        return Some(unexplained::below_bar_entry(
-            &p.grid, &added, &valid, what, &summary,
-        ));
+        if let Some(u) = refined_entry(
+            p,
+            opts,
+            effects,
+            ev,
+            f,
+            (cand, score),
+            also,
+            None,
+            measured_rms_nm,
+        ) {
+            out.insert(0, u);
+            break;
+        }
     }
-    None
+    out
+}
+
+/// One candidate refined jointly with the accepted effects (as a contender is) and reported
+/// as an `unexplained` entry of its parameters and added removal; `None` when the refinement
+/// fails, leaves the residual no smaller, or makes an effect implausible.
+#[allow(clippy::too_many_arguments)]
+fn refined_entry(
+    p: &Problem,
+    opts: &Options,
+    effects: &[Box<dyn Effect>],
+    ev: &Eval,
+    f: &Fit,
+    (cand, score): (&Candidate, &Score),
+    also: Vec<(String, f64)>,
+    z_beyond_smooth: Option<f64>,
+    measured_rms_nm: f64,
+) -> Option<Unexplained> {
+    let refined = || -> Result<_, CalibrateError> {
+        let mut trial = effects.to_vec();
+        trial.push(if fallback::is_fallback(cand.kind) {
+            (cand.make)(&[], 1.0)
+        } else {
+            let fc = fit(ev, &cand.extra)?;
+            (cand.make)(&fc.coef[ev.cols.len()..], fc.coef[0])
+        });
+        let (ev_t, f_t) = refine(p, &mut trial, opts.refine_iters)?;
+        let lin = ev_t.linear(&f_t);
+        if f_t.rms() >= f.rms() || trial.iter().any(|e| e.implausible(p, &lin).is_some()) {
+            return Ok(None);
+        }
+        let all = model_values(&ev_t, &ev_t.names, &f_t.coef);
+        let added = effect_removal(p, &trial, trial.len() - 1, &ev_t, &f_t, &all)?;
+        Ok(Some((trial, ev_t, f_t, lin, added)))
+    };
+    let Ok(Some((trial, ev_t, f_t, lin, added))) = refined() else {
+        return None;
+    };
+    let (_, valid) = p.expand(&f_t.resid, &ev_t.w);
+    let e = &trial[trial.len() - 1];
+    let params: Vec<(String, Param)> = e.params(&lin);
+    let summary = params
+        .iter()
+        .find_map(|(n, v)| match v {
+            Param::Text(t) if n == "summary" => Some(t.clone()),
+            _ => None,
+        })
+        .unwrap_or_else(|| {
+            params
+                .iter()
+                .filter_map(|(n, v)| match v {
+                    Param::Num(x) => Some(format!("{n} {x:.4}")),
+                    Param::Text(t) => Some(format!("{n} {t}")),
+                    Param::List(_) => None,
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        });
+    let what = unexplained::BelowBar {
+        kind: e.kind().into(),
+        key: cand.key.clone(),
+        heldout_z: score.z,
+        heldout_reduction_fraction: score.fraction,
+        params: params
+            .iter()
+            .map(|(n, v)| (n.clone(), param_value(v)))
+            .collect(),
+        residual_rms_if_added_nm: f_t.rms(),
+        also,
+        peak_per_mm: 0.0,
+        model_accuracy_nm: MODEL_ACCURACY * measured_rms_nm,
+        z_beyond_smooth,
+    };
+    Some(unexplained::below_bar_entry(
+        &p.grid, &added, &valid, what, &summary,
+    ))
 }
 
 /// Accuracy of the forward model relative to the measured removal RMS (issue 14's truth suite:

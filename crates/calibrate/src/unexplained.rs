@@ -55,6 +55,13 @@ pub struct BelowBar {
     /// measured removal's RMS). An added removal smaller than this may be the model's own error
     /// rather than the run's.
     pub model_accuracy_nm: f64,
+    /// Set when the candidate is a rate that the data find (`heldout_z`,
+    /// `heldout_reduction_fraction` on the data) but that stays under the selection's bar beyond
+    /// a smooth additive map (this is its held-out z there; `fallback::smooth_additive_columns`):
+    /// a rate change the data cannot tell from a smooth difference between the two
+    /// measurements, not added to the model for that reason.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub z_beyond_smooth: Option<f64>,
 }
 
 /// The entry for a below-bar candidate whose added removal (nm, full grid) is `map`: its RMS
@@ -98,20 +105,41 @@ pub fn below_bar_entry(
             v.join(", ")
         )
     };
+    let why = match what.z_beyond_smooth {
+        None => format!(
+            "significant on held-out data (z {:.1}) but under the size bar ({:.3} % of the \
+             held-out sum of squares), so not added to the model",
+            what.heldout_z,
+            100.0 * what.heldout_reduction_fraction
+        ),
+        Some(zb) => format!(
+            "significant on held-out data (z {:.1}, {:.3} % of the held-out sum of squares) but \
+             under the bar beyond a smooth additive difference between the two measurements \
+             (z {zb:.1} there): a rate change or the instrument's drift between the maps (air, \
+             alignment), which the data cannot tell apart, so not added to the model",
+            what.heldout_z,
+            100.0 * what.heldout_reduction_fraction
+        ),
+    };
+    // Periods (mm) of the peak and the band; a band reaching 0 /mm has no longest period.
+    let peak_period = if peak > 0.0 {
+        format!("period {:.2} mm", 1.0 / peak)
+    } else {
+        "no finite period".into()
+    };
+    let periods = match (band[0] > 0.0, band[1] > 0.0) {
+        (true, true) => format!("periods {:.2}-{:.2} mm", 1.0 / band[1], 1.0 / band[0]),
+        (false, true) => format!("periods {:.2} mm and longer", 1.0 / band[1]),
+        _ => "no finite period".into(),
+    };
     Unexplained {
         description: format!(
-            "{}: significant on held-out data (z {:.1}) but under the size bar ({:.3} % of the \
-             held-out sum of squares), so not added to the model: {summary}; {rms:.3} nm RMS{caveat} \
-             varying along {direction}, peaking at {peak:.3} /mm (period {:.2} mm), 80 % of its \
-             power at {:.3}-{:.3} /mm (periods {:.2}-{:.2} mm), {}{also}",
+            "{}: {why}: {summary}; {rms:.3} nm RMS{caveat} \
+             varying along {direction}, peaking at {peak:.3} /mm ({peak_period}), 80 % of its \
+             power at {:.3}-{:.3} /mm ({periods}), {}{also}",
             what.key,
-            what.heldout_z,
-            100.0 * what.heldout_reduction_fraction,
-            1.0 / peak.max(1e-12),
             band[0],
             band[1],
-            1.0 / band[1].max(1e-12),
-            1.0 / band[0].max(1e-12),
             located(bbox, share)
         ),
         band_per_mm: band,
@@ -418,6 +446,7 @@ mod tests {
             also: Vec::new(),
             peak_per_mm: 0.0,
             model_accuracy_nm: 0.5,
+            z_beyond_smooth: None,
         };
         let u = below_bar_entry(&g, &map, &valid, what, "a test");
         let b = u.below_bar.as_ref().unwrap();
