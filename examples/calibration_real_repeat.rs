@@ -186,12 +186,23 @@ fn one_run(
         .iter()
         .find(|b| b.band == "process")
         .map(|b| b.rms_nm));
+    // Rates the data find but the smooth check turns down (a rate or the instrument's drift).
+    let rate_or_drift: Vec<String> = cal
+        .unexplained
+        .iter()
+        .filter_map(|u| u.below_bar.as_ref())
+        .filter_map(|b| {
+            b.z_beyond_smooth
+                .map(|zb| format!("{} (z {:.1}, {zb:.1} beyond)", b.key, b.heldout_z))
+        })
+        .collect();
     Ok(format!(
-        "{ib}->{ia}: pair differs by {pair} nm RMS (plane removed); floor {:.3} nm; baseline {:.3} -> final {:.3} nm (process band {process}); accepted [{}]; {} unexplained; {wall:.1} s",
+        "{ib}->{ia}: pair differs by {pair} nm RMS (plane removed); floor {:.3} nm; baseline {:.3} -> final {:.3} nm (process band {process}); accepted [{}]; {} unexplained, rate or drift [{}]; {wall:.1} s",
         cal.noise_floor_rms_nm,
         cal.baseline.residual_rms_nm,
         cal.final_.residual_rms_nm,
         effects.join(", "),
-        cal.unexplained.len()
+        cal.unexplained.len(),
+        rate_or_drift.join(", ")
     ))
 }
