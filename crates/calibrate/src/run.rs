@@ -507,46 +507,9 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                     .zip(&scores)
                     .map(|(c, s)| to_check(c, s).then(|| holdout(&ev, &c.extra, &sp, &bg_s)))
                     .collect();
-                // A library kind is a named mechanism of few parameters, possibly offered as
-                // several variants under one key (the height's smoothing lengths). Its variant
-                // that the data score best decides for all: if it predicts the held-out data
-                // better than the smooth map alone, or stays significant beyond it, every
-                // variant keeps its own score, so the data still choose among them. The
-                // fallback's generic maps, lines and windows always keep the smaller score.
-                let mut best: Vec<(&str, f64, bool)> = Vec::new();
-                for ((c, s), b) in cands.iter().zip(&scores).zip(&beyond) {
-                    let Some(b) = b else { continue };
-                    if fallback::is_fallback(c.kind) {
-                        continue;
-                    }
-                    let stands = s.delta > alone.delta || b.z >= Z_MIN;
-                    match best.iter_mut().find(|(k, _, _)| *k == c.key) {
-                        Some(e) if s.z > e.1 => *e = (c.key.as_str(), s.z, stands),
-                        Some(_) => {}
-                        None => best.push((c.key.as_str(), s.z, stands)),
-                    }
-                }
-                let stands = |c: &Candidate| best.iter().any(|(k, _, st)| *k == c.key && *st);
-                let mut sc = Vec::with_capacity(cands.len());
-                for (i, ((c, s), b)) in cands.iter().zip(scores).zip(&beyond).enumerate() {
-                    let Some(b) = b else {
-                        sc.push(s);
-                        continue;
-                    };
-                    beyond_smooth[i] = Some(b.z);
-                    if stands(c) {
-                        sc.push(s);
-                        continue;
-                    }
-                    if b.z < s.z {
-                        demoted[i] = Some((s, b.z));
-                    }
-                    sc.push(Score {
-                        delta: s.delta.min(b.delta),
-                        z: s.z.min(b.z),
-                        fraction: s.fraction.min(b.fraction),
-                    });
-                }
+                let (sc, bz, dm) = judged_beyond_smooth(&cands, scores, &beyond, &alone);
+                beyond_smooth = bz;
+                demoted = dm;
                 sc
             }
         } else {
@@ -1003,6 +966,61 @@ fn effect_removal(
     Ok(p.expand(&d, &ev.w).0)
 }
 
+/// The smooth check's verdict on a round's candidates (`fallback::smooth_additive_columns`
+/// says why it is made). `beyond[i]` is candidate `i`'s held-out score with the smooth map in
+/// the base (`None` when it was not rescored), `alone` the smooth map's own. A library kind
+/// is a named mechanism of few parameters, possibly offered as several variants under one key
+/// (the height's smoothing lengths); its variant that the data score best decides for all: if
+/// it predicts the held-out data better than the smooth map alone, or stays significant beyond
+/// it (z at least `Z_MIN`), every variant keeps its own score, so the data still choose among
+/// them. Otherwise, and always for the fallback's generic maps, lines and windows, a rescored
+/// candidate keeps the smaller of its two scores. Returns the scores, each rescored
+/// candidate's z beyond the map, and for each one the check lowered, its score on the data
+/// with that z.
+fn judged_beyond_smooth(
+    cands: &[Candidate],
+    scores: Vec<Score>,
+    beyond: &[Option<Score>],
+    alone: &Score,
+) -> (Vec<Score>, Vec<Option<f64>>, Vec<Demoted>) {
+    let mut best: Vec<(&str, f64, bool)> = Vec::new();
+    for ((c, s), b) in cands.iter().zip(&scores).zip(beyond) {
+        let Some(b) = b else { continue };
+        if fallback::is_fallback(c.kind) {
+            continue;
+        }
+        let stands = s.delta > alone.delta || b.z >= Z_MIN;
+        match best.iter_mut().find(|(k, _, _)| *k == c.key) {
+            Some(e) if s.z > e.1 => *e = (c.key.as_str(), s.z, stands),
+            Some(_) => {}
+            None => best.push((c.key.as_str(), s.z, stands)),
+        }
+    }
+    let stands = |c: &Candidate| best.iter().any(|(k, _, st)| *k == c.key && *st);
+    let n = cands.len();
+    let (mut sc, mut zb, mut dm) = (Vec::with_capacity(n), vec![None; n], vec![None; n]);
+    for (i, ((c, s), b)) in cands.iter().zip(scores).zip(beyond).enumerate() {
+        let Some(b) = b else {
+            sc.push(s);
+            continue;
+        };
+        zb[i] = Some(b.z);
+        if stands(c) {
+            sc.push(s);
+            continue;
+        }
+        if b.z < s.z {
+            dm[i] = Some((s, b.z));
+        }
+        sc.push(Score {
+            delta: s.delta.min(b.delta),
+            z: s.z.min(b.z),
+            fraction: s.fraction.min(b.fraction),
+        });
+    }
+    (sc, zb, dm)
+}
+
 /// A candidate with its held-out score.
 type Scored = (Candidate, Score);
 
@@ -1225,6 +1243,78 @@ mod tests {
             z: 10.0,
             fraction: 0.1,
         }
+    }
+
+    fn sz(delta: f64, z: f64) -> Score {
+        Score {
+            delta,
+            z,
+            fraction: delta / 100.0,
+        }
+    }
+
+    fn variant(key: &str, kind: &'static str) -> Candidate {
+        Candidate {
+            key: key.into(),
+            ..cand(kind, 1)
+        }
+    }
+
+    /// A fallback always keeps the smaller of its two scores, and is listed as lowered with
+    /// its score on the data; a candidate not rescored is left as it is.
+    #[test]
+    fn a_fallback_keeps_the_smaller_score() {
+        let cands = [cand("rate_map", 20), cand("tif_scale", 1)];
+        let scores = vec![sz(40.0, 8.0), sz(30.0, 12.0)];
+        let beyond = [Some(sz(9.0, 3.0)), None];
+        let alone = sz(1.0, 1.0);
+        let (sc, zb, dm) = judged_beyond_smooth(&cands, scores, &beyond, &alone);
+        assert_eq!((sc[0].delta, sc[0].z, sc[0].fraction), (9.0, 3.0, 0.09));
+        assert_eq!((sc[1].delta, sc[1].z), (30.0, 12.0));
+        assert_eq!(zb, [Some(3.0), None]);
+        assert_eq!(dm[0].map(|(s, z)| (s.z, z)), Some((8.0, 3.0)));
+        assert!(dm[1].is_none());
+    }
+
+    /// The height covariate's smoothing lengths are variants of one key: the best-scored one
+    /// stands beyond the smooth map (z 6), so all keep their own scores and their order,
+    /// though another variant alone would have fallen under it.
+    #[test]
+    fn a_library_kinds_variants_keep_their_order_when_its_best_stands() {
+        let h = "rate_covariate:height";
+        let cands = [
+            variant(h, "rate_covariate"),
+            variant(h, "rate_covariate"),
+            variant(h, "rate_covariate"),
+        ];
+        let scores = vec![sz(20.0, 6.3), sz(22.0, 7.1), sz(10.0, 4.5)];
+        // The smooth map alone takes more than any variant: only the z beyond decides.
+        let alone = sz(50.0, 9.0);
+        let beyond = [Some(sz(15.0, 6.7)), Some(sz(12.0, 6.0)), Some(sz(4.0, 3.0))];
+        let (sc, zb, dm) = judged_beyond_smooth(&cands, scores, &beyond, &alone);
+        let z: Vec<f64> = sc.iter().map(|s| s.z).collect();
+        assert_eq!(z, [6.3, 7.1, 4.5]);
+        assert_eq!(zb, [Some(6.7), Some(6.0), Some(3.0)]);
+        assert!(dm.iter().all(Option::is_none));
+    }
+
+    /// When the best variant neither beats the smooth map alone nor stays at z 4 beyond it,
+    /// every variant takes the smaller score; a library kind that predicts the held-out data
+    /// better than the smooth map keeps its own though its z beyond is low.
+    #[test]
+    fn a_library_kind_falls_with_its_best_variant_and_stands_when_it_beats_the_map() {
+        let cands = [
+            variant("rate_profile_time", "rate_profile_time"),
+            variant("rate_oscillation", "rate_oscillation"),
+            variant("rate_drift", "rate_drift"),
+        ];
+        let scores = vec![sz(20.0, 6.0), sz(18.0, 5.0), sz(60.0, 9.0)];
+        let alone = sz(50.0, 9.0);
+        let beyond = [Some(sz(3.0, 2.0)), Some(sz(2.0, 1.5)), Some(sz(5.0, 2.5))];
+        let (sc, _, dm) = judged_beyond_smooth(&cands, scores, &beyond, &alone);
+        let z: Vec<f64> = sc.iter().map(|s| s.z).collect();
+        assert_eq!(z, [2.0, 1.5, 9.0]);
+        assert!(dm[0].is_some() && dm[1].is_some() && dm[2].is_none());
     }
 
     #[test]
