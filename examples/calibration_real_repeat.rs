@@ -12,7 +12,11 @@
 //! accepted effect is a false positive; with an effect injected into the deposited removal, the
 //! calibration should find it through the instrument's error.
 //!
-//! Run: `cargo run --release --example calibration_real_repeat [-- --seeds 2 --kinds null,rate_drift]`.
+//! Run: `cargo run --release --example calibration_real_repeat [-- --seeds 2 --kinds null,rate_drift]
+//! [--repeatability declared|none]]`. With `declared` (the default) every run declares the
+//! instrument's repeatability as a lab would from this series (`[measurement]
+//! repeatability_nm`): the quadratic mean over its three pairs of their difference's RMS, plane
+//! removed; `none` runs as a recipe without the key.
 //! Prints one line per run and a markdown table (reports/calibration.md keeps the measured one).
 //! The data are read from `$BONNETLAB_SHARED_DATA`, else `../shared/data`; a missing file is an
 //! error naming it (exit 2).
@@ -38,6 +42,7 @@ struct Args {
     seeds: u64,
     kinds: Vec<String>,
     pitches: Vec<f64>,
+    declare_repeatability: bool,
 }
 
 fn args() -> Result<Args, String> {
@@ -45,6 +50,7 @@ fn args() -> Result<Args, String> {
         seeds: 1,
         kinds: vec!["null".into()],
         pitches: vec![2.0, 3.0],
+        declare_repeatability: true,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -57,6 +63,17 @@ fn args() -> Result<Args, String> {
                     .split(',')
                     .map(|s| s.parse::<f64>().map_err(|e| format!("--pitches: {e}")))
                     .collect::<Result<_, _>>()?
+            }
+            "--repeatability" => {
+                a.declare_repeatability = match val()?.as_str() {
+                    "declared" => true,
+                    "none" => false,
+                    v => {
+                        return Err(format!(
+                            "--repeatability: \"declared\" or \"none\", got {v}"
+                        ))
+                    }
+                }
             }
             other => return Err(format!("unknown argument {other}")),
         }
@@ -114,6 +131,22 @@ fn main() -> ExitCode {
             }
         }
     }
+    let repeatability = if a.declare_repeatability {
+        let pairs: Option<Vec<f64>> = [(0, 1), (0, 2), (1, 2)]
+            .iter()
+            .map(|&(i, j)| difference_rms(&maps[i], &maps[j]))
+            .collect();
+        let Some(pairs) = pairs else {
+            eprintln!("calibration_real_repeat: the series' pair differences cannot be formed");
+            return ExitCode::from(1);
+        };
+        let r = (pairs.iter().map(|v| v * v).sum::<f64>() / pairs.len() as f64).sqrt();
+        println!("declared repeatability {r:.3} nm RMS (the series' three pairs: {pairs:.3?})");
+        Some(r)
+    } else {
+        println!("no repeatability declared");
+        None
+    };
     let mut rows = Vec::new();
     for kind in &a.kinds {
         let effects = match injected(kind) {
@@ -126,7 +159,7 @@ fn main() -> ExitCode {
         for &pitch in &a.pitches {
             for seed in 1..=a.seeds {
                 for (ib, ia) in [(0, 1), (1, 0), (0, 2), (2, 0), (1, 2), (2, 1)] {
-                    match one_run(&maps, ib, ia, &effects, pitch, seed) {
+                    match one_run(&maps, ib, ia, &effects, pitch, seed, repeatability) {
                         Ok(line) => {
                             println!("{kind} pitch {pitch} seed {seed}: {line}");
                             rows.push((kind.clone(), pitch, seed, line));
@@ -155,6 +188,7 @@ fn one_run(
     effects: &[Injected],
     pitch: f64,
     seed: u64,
+    repeatability_nm: Option<f64>,
 ) -> Result<String, String> {
     let (before, after) = (&maps[ib], &maps[ia]);
     let cfg = SynthConfig {
@@ -162,7 +196,8 @@ fn one_run(
         ..SynthConfig::on_grid_of(before, seed, pitch).map_err(|e| e.to_string())?
     };
     let real = on_measured_maps(&cfg, before, after).map_err(|e| format!("generator: {e}"))?;
-    let p = real.problem().map_err(|e| e.to_string())?;
+    let mut p = real.problem().map_err(|e| e.to_string())?;
+    p.repeatability_nm = repeatability_nm;
     let t = Instant::now();
     let cal = calibrate(&p, &Options::default()).map_err(|e| e.to_string())?;
     let wall = t.elapsed().as_secs_f64();
@@ -196,13 +231,28 @@ fn one_run(
                 .map(|zb| format!("{} (z {:.1}, {zb:.1} beyond)", b.key, b.heldout_z))
         })
         .collect();
+    // The smooth checks of the rounds: the smooth structure against the drift bound.
+    let checks: Vec<String> = cal
+        .rounds
+        .iter()
+        .filter_map(|r| r.smooth_check)
+        .map(|c| {
+            format!(
+                "{:.2} nm vs {} ({})",
+                c.map_rms_nm,
+                nm(c.drift_bound_nm),
+                if c.applied { "applied" } else { "not applied" }
+            )
+        })
+        .collect();
     Ok(format!(
-        "{ib}->{ia}: pair differs by {pair} nm RMS (plane removed); floor {:.3} nm; baseline {:.3} -> final {:.3} nm (process band {process}); accepted [{}]; {} unexplained, rate or drift [{}]; {wall:.1} s",
+        "{ib}->{ia}: pair differs by {pair} nm RMS (plane removed); floor {:.3} nm; baseline {:.3} -> final {:.3} nm (process band {process}); accepted [{}]; {} unexplained, rate or drift [{}]; smooth check [{}]; {wall:.1} s",
         cal.noise_floor_rms_nm,
         cal.baseline.residual_rms_nm,
         cal.final_.residual_rms_nm,
         effects.join(", "),
         cal.unexplained.len(),
-        rate_or_drift.join(", ")
+        rate_or_drift.join(", "),
+        checks.join(", ")
     ))
 }

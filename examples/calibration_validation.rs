@@ -9,8 +9,13 @@
 //! ```text
 //! cargo run --release --example calibration_validation -- [--runs 50] [--size 400]
 //!     [--seed 1] [--sizes 0.5,1,2] [--kinds null,registration,...] [--out reports/calibration.md]
-//!     [--no-time] [--signal]
+//!     [--no-time] [--signal] [--repeatability declared|none]
 //! ```
+//!
+//! `--repeatability` (default `declared`): each run's problem carries the synthetic instrument's
+//! repeatability as a lab would declare it (`[measurement] repeatability_nm`): the RMS of the
+//! difference of two measurements of an unchanged part, which for this instrument is its two
+//! maps' white noise in quadrature (it has no drift). `none` runs as a recipe without the key.
 //!
 //! With `BONNETLAB_HARNESS_EFFECTS` set, each run also logs its accepted effects as the
 //! calibration's JSON writes them (every parameter with its uncertainty), and any candidate
@@ -78,6 +83,8 @@ struct Args {
     pixel_average: usize,
     /// How calibrate takes the pixels (`--pixels point|area`, a recipe's `[measurement] pixels`).
     pixels: PixelSampling,
+    /// Whether each run declares the instrument's repeatability (see the header).
+    declare_repeatability: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -96,6 +103,7 @@ fn parse_args() -> Result<Args, String> {
         signal: false,
         pixel_average: 1,
         pixels: PixelSampling::Point,
+        declare_repeatability: true,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -123,6 +131,17 @@ fn parse_args() -> Result<Args, String> {
                 let v = val()?;
                 a.pixels = PixelSampling::from_name(&v)
                     .ok_or(format!("--pixels: \"point\" or \"area\", got {v}"))?
+            }
+            "--repeatability" => {
+                a.declare_repeatability = match val()?.as_str() {
+                    "declared" => true,
+                    "none" => false,
+                    v => {
+                        return Err(format!(
+                            "--repeatability: \"declared\" or \"none\", got {v}"
+                        ))
+                    }
+                }
             }
             other => return Err(format!("unknown option {other}")),
         }
@@ -662,7 +681,10 @@ fn main() {
                 }
             }
             let t = Instant::now();
-            let res = run.problem_seen(args.pixels).and_then(|p| {
+            let res = run.problem_seen(args.pixels).and_then(|mut p| {
+                if args.declare_repeatability {
+                    p.repeatability_nm = Some(run.true_noise_floor_nm);
+                }
                 let cal = calibrate(&p, &Options::default())?;
                 let s = &p.samples;
                 Ok((cal, (s.dwell_mean(&s.x_mm), s.dwell_mean(&s.y_mm))))
@@ -758,7 +780,7 @@ fn report(
     let mut s = String::new();
     s.push_str("## Validation harness (issue #15)\n\n");
     s.push_str(&format!(
-        "Measured with `cargo run --release --example calibration_validation -- --runs {} --size {} --seed {} --sizes {}{}{}`: \
+        "Measured with `cargo run --release --example calibration_validation -- --runs {} --size {} --seed {} --sizes {}{}{}{}`: \
          **{} runs per kind and size, {} x {} maps (pixel {:.3} mm, 100 mm part)**. \
          Generator: `bonnetlab_calibrate::synth` (exact time-domain deposition of the paper's precessing bonnet, \
          800 nm mm^2/s, sub-steps {:.3} mm; never calibrate's FFT model). Calibration: `pipeline::problem_with_spot` + \
@@ -777,6 +799,7 @@ fn report(
         } else {
             String::new()
         } + if args.pixels == PixelSampling::Area { " --pixels area" } else { "" },
+        if args.declare_repeatability { "" } else { " --repeatability none" },
         args.runs,
         args.size,
         args.size,
@@ -793,6 +816,10 @@ fn report(
         } + match args.pixels {
             PixelSampling::Area => ", read by calibrate as area means (`[measurement] pixels = \"area\"`)",
             PixelSampling::Point => ", read by calibrate as point samples",
+        } + if args.declare_repeatability {
+            "; each run declares the instrument's repeatability (`repeatability_nm`: its two maps' white noise in quadrature, the RMS of the difference of two measurements of an unchanged part on this drift-free instrument)"
+        } else {
+            "; no repeatability declared"
         },
     ));
     s.push_str(

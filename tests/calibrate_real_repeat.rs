@@ -7,6 +7,8 @@
 
 use bonnetlab::calibrate::run::{calibrate, Calibration, Options};
 use bonnetlab::calibrate::synth::{on_measured_maps, Injected, SynthConfig};
+use bonnetlab::surface::form::{remove_terms, Term};
+use bonnetlab::surface::stats::height_stats;
 use bonnetlab::surface::Surface;
 
 #[path = "common/shared_data.rs"]
@@ -27,13 +29,34 @@ fn series() -> Vec<Surface> {
 }
 
 fn calibrate_pair(maps: &[Surface], b: usize, a: usize, effects: Vec<Injected>) -> Calibration {
+    calibrate_declared(maps, b, a, effects, None)
+}
+
+/// [`calibrate_pair`] with the instrument's repeatability declared (`[measurement]
+/// repeatability_nm`) or not.
+fn calibrate_declared(
+    maps: &[Surface],
+    b: usize,
+    a: usize,
+    effects: Vec<Injected>,
+    repeatability_nm: Option<f64>,
+) -> Calibration {
     let cfg = SynthConfig {
         effects,
         ..SynthConfig::on_grid_of(&maps[b], 1, 3.0).expect("the series has square pixels")
     };
     let run = on_measured_maps(&cfg, &maps[b], &maps[a]).expect("the run is generated");
-    let p = run.problem().expect("the run's problem");
+    let mut p = run.problem().expect("the run's problem");
+    p.repeatability_nm = repeatability_nm;
     calibrate(&p, &Options::default()).expect("calibrate runs")
+}
+
+/// RMS (nm) of the difference of two measurements, plane removed: what a lab quotes as the
+/// instrument's repeatability.
+fn pair_rms(a: &Surface, b: &Surface) -> f64 {
+    let d = b.difference(a).expect("the series shares its grid");
+    let (flat, _) = remove_terms(&d, &[Term::Piston, Term::Tilt]).expect("a plane is removed");
+    height_stats(&flat).expect("statistics").rms_nm
 }
 
 /// With nothing injected, no effect is accepted on any of the three pairs (before this check
@@ -104,4 +127,35 @@ fn a_wider_spot_is_found_through_the_instruments_drift() {
     assert_eq!(kinds, ["tif_scale"]);
     let scale = cal.effects[0].params["scale"].as_f64().expect("a scale");
     assert!((scale - 1.1).abs() < 0.01, "scale {scale}");
+}
+
+/// With the repeatability declared as a lab would quote it from this series (the quadratic
+/// mean of its three pairs' differences, 1.26 nm RMS), the smooth difference of every pair
+/// stays within the bound it sets, so the check is made and still nothing is accepted.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
+fn a_declared_repeatability_keeps_the_drift_out() {
+    let maps = series();
+    let pairs = [(0, 1), (0, 2), (1, 2)];
+    let r = (pairs
+        .iter()
+        .map(|&(i, j)| pair_rms(&maps[i], &maps[j]).powi(2))
+        .sum::<f64>()
+        / 3.0)
+        .sqrt();
+    assert!((1.0..1.5).contains(&r), "the series' repeatability {r} nm");
+    for (b, a) in pairs {
+        let cal = calibrate_declared(&maps, b, a, Vec::new(), Some(r));
+        let kinds: Vec<&str> = cal.effects.iter().map(|e| e.kind.as_str()).collect();
+        assert!(kinds.is_empty(), "pair {b}->{a} accepted {kinds:?}");
+        let checks: Vec<_> = cal.rounds.iter().filter_map(|r| r.smooth_check).collect();
+        assert!(!checks.is_empty(), "pair {b}->{a}: no round made the check");
+        for c in checks {
+            let bound = c.drift_bound_nm.expect("a bound from the declared value");
+            assert!(c.applied && c.map_rms_nm <= bound, "pair {b}->{a}: {c:?}");
+        }
+    }
 }

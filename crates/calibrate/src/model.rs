@@ -299,6 +299,11 @@ pub struct Problem {
     pub yn: Vec<f64>,
     pub covariates: Covariates,
     pub tif_radius_mm: f64,
+    /// The instrument's declared repeatability (nm RMS of the difference between two
+    /// measurements of an unchanged part, piston and tilt removed; a recipe's
+    /// `[measurement] repeatability_nm`), when declared. It bounds how large a smooth
+    /// difference between the two maps the instrument alone makes (`run`'s smooth check).
+    pub repeatability_nm: Option<f64>,
     kernels: Mutex<Vec<Arc<Kernels>>>,
     resampler: Resampler,
     resampled: ResampleCache,
@@ -539,6 +544,7 @@ impl Problem {
             yn,
             covariates,
             tif_radius_mm: radius,
+            repeatability_nm: None,
             kernels: Mutex::new(Vec::new()),
             resampler,
             resampled: Mutex::new(Vec::new()),

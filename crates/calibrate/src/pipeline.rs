@@ -127,12 +127,14 @@ pub fn load_recipe(recipe_path: &Path) -> Result<Problem, PipelineError> {
         tool.field().half_extent_mm(),
     )
     .map_err(|e| PipelineError::input(&recipe.path_log, e))?;
-    Problem::new(&before, &after, &TifMap::new(tool), &path).map_err(|e| match e {
+    let mut p = Problem::new(&before, &after, &TifMap::new(tool), &path).map_err(|e| match e {
         CalibrateError::Processing(m) => PipelineError {
             file: recipe_path.to_path_buf(),
             message: m,
             exit_code: 1,
         },
         other => PipelineError::input(recipe_path, other),
-    })
+    })?;
+    p.repeatability_nm = recipe.repeatability_nm;
+    Ok(p)
 }

@@ -124,6 +124,47 @@ pub struct Round {
     pub candidates: Vec<CandidateScore>,
     /// Refined contenders rejected as physically implausible.
     pub rejected: Vec<Rejected>,
+    /// In a round where a rate candidate was significant on the data: how large the smooth
+    /// structure is against what the instrument alone can make, and whether rate candidates
+    /// were scored beyond it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub smooth_check: Option<SmoothCheck>,
+}
+
+/// The smooth check of a round (`fallback::smooth_additive_columns` says why it is made).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct SmoothCheck {
+    /// RMS (nm) of what the smooth additive map alone explains of the residual, on held-out
+    /// data (the square root of its held-out reduction of the sum of squares per pixel).
+    pub map_rms_nm: f64,
+    /// The largest smooth difference the instrument alone makes (nm RMS): `DRIFT_SPREAD` times
+    /// the smooth part of the declared repeatability, `sqrt(repeatability^2 - floor^2)`;
+    /// `None` when no repeatability is declared (then the check is always made).
+    pub drift_bound_nm: Option<f64>,
+    /// Whether the rate candidates were scored beyond the smooth map: not when the smooth
+    /// structure exceeds the bound, which the instrument's drift cannot make.
+    pub applied: bool,
+}
+
+/// How far a pair's smooth difference may exceed the instrument's declared repeatability:
+/// the three measurements of one flat in ../shared/data (`01/02/04_801B`) differ pairwise by
+/// 0.87 to 1.64 nm RMS, a spread of 1.9 about the same instrument on the same day.
+pub const DRIFT_SPREAD: f64 = 2.0;
+
+impl SmoothCheck {
+    /// The check for a smooth map that explains `alone` (held-out) of a residual on `n`
+    /// pixels, with the declared repeatability `repeatability_nm` and the run's white-noise
+    /// floor `floor_nm` (both of the removal `before - after`).
+    fn of(alone: &Score, n: f64, repeatability_nm: Option<f64>, floor_nm: f64) -> SmoothCheck {
+        let map_rms_nm = (alone.delta.max(0.0) / n.max(1.0)).sqrt();
+        let drift_bound_nm =
+            repeatability_nm.map(|r| DRIFT_SPREAD * (r * r - floor_nm * floor_nm).max(0.0).sqrt());
+        SmoothCheck {
+            map_rms_nm,
+            drift_bound_nm,
+            applied: drift_bound_nm.is_none_or(|b| map_rms_nm <= b),
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -142,6 +183,9 @@ pub struct Calibration {
     /// How the model took the maps' and the spot's pixels (`point` or `area`, the recipe's
     /// `[measurement] pixels`).
     pub pixels: String,
+    /// The instrument's repeatability as declared (`[measurement] repeatability_nm`; nm RMS of
+    /// the difference of two measurements of an unchanged part), or null.
+    pub repeatability_nm: Option<f64>,
     pub effects: Vec<EffectReport>,
     pub unexplained: Vec<Unexplained>,
     /// Strongly correlated parameters of different accepted effects (joint refit).
@@ -494,13 +538,21 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         };
         let mut beyond_smooth: Vec<Option<f64>> = vec![None; cands.len()];
         let mut demoted: Vec<Demoted> = vec![None; cands.len()];
+        let mut smooth_check = None;
         let scores: Vec<Score> = if cands.iter().zip(&scores).any(|(c, s)| to_check(c, s)) {
             let smooth = smooth_cols.get_or_init(|| fallback::smooth_additive_columns(p));
-            if smooth.is_empty() {
-                scores
-            } else {
-                // What the smooth map alone takes from the held-out sum of squares.
-                let alone = holdout(&ev, smooth, &sp, &bg);
+            // What the smooth map alone takes from the held-out sum of squares, against what
+            // the instrument's declared repeatability allows.
+            let alone = (!smooth.is_empty()).then(|| holdout(&ev, smooth, &sp, &bg));
+            let check =
+                alone.map(|a| SmoothCheck::of(&a, ev.w.iter().sum(), p.repeatability_nm, noise));
+            smooth_check = check;
+            if trace {
+                if let Some(c) = check {
+                    eprintln!("smooth check: {c:?}");
+                }
+            }
+            if let (Some(alone), Some(SmoothCheck { applied: true, .. })) = (alone, check) {
                 let bg_s = base_gram_with(&ev, smooth, &sp);
                 let beyond: Vec<Option<Score>> = cands
                     .par_iter()
@@ -511,6 +563,8 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                 beyond_smooth = bz;
                 demoted = dm;
                 sc
+            } else {
+                scores
             }
         } else {
             scores
@@ -620,6 +674,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         let mut round = Round {
             accepted: None,
             rejected: Vec::new(),
+            smooth_check,
             candidates: cands
                 .iter()
                 .zip(&scores)
@@ -897,6 +952,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         noise_floor_axis: floor_axis,
         process_band: band,
         pixels: p.tif.pixels().name().to_string(),
+        repeatability_nm: p.repeatability_nm,
         effects: reports,
         unexplained,
         correlations,
@@ -1227,6 +1283,42 @@ fn clone_eval_shell(ev: &Eval) -> Eval {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The bound is `DRIFT_SPREAD` times the smooth part of the declared repeatability (the
+    /// white floor taken out in quadrature); the check is made up to it, always when nothing
+    /// is declared, and a declared value at or below the floor leaves no room for drift.
+    #[test]
+    fn the_smooth_check_is_bounded_by_the_declared_repeatability() {
+        // Held-out reduction 3.61 nm^2 per pixel over 100 pixels: a 1.9 nm RMS smooth map.
+        let alone = Score {
+            delta: 361.0,
+            z: 9.0,
+            fraction: 0.5,
+        };
+        let c = SmoothCheck::of(&alone, 100.0, None, 0.75);
+        assert!((c.map_rms_nm - 1.9).abs() < 1e-12 && c.applied && c.drift_bound_nm.is_none());
+        // sqrt(1.25^2 - 0.75^2) = 1: a bound of 2 nm.
+        let c = SmoothCheck::of(&alone, 100.0, Some(1.25), 0.75);
+        assert!(
+            (c.drift_bound_nm.unwrap() - 2.0).abs() < 1e-12 && c.applied,
+            "{c:?}"
+        );
+        let wider = Score {
+            delta: 441.0,
+            ..alone
+        };
+        let c = SmoothCheck::of(&wider, 100.0, Some(1.25), 0.75);
+        assert!(!c.applied, "2.1 nm against 2 nm: {c:?}");
+        let c = SmoothCheck::of(&alone, 100.0, Some(0.7), 0.75);
+        assert!(c.drift_bound_nm == Some(0.0) && !c.applied, "{c:?}");
+        // A map that loses on held-out data explains nothing.
+        let lost = Score {
+            delta: -5.0,
+            ..alone
+        };
+        let c = SmoothCheck::of(&lost, 100.0, Some(0.7), 0.75);
+        assert!(c.map_rms_nm == 0.0 && c.applied, "{c:?}");
+    }
 
     fn cand(kind: &'static str, ncols: usize) -> Candidate {
         Candidate {

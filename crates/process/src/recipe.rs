@@ -62,6 +62,10 @@ pub struct Recipe {
     pub vibration: Option<Table>,
     /// How the maps' and the spot's pixels sample the surface (`[measurement] pixels`).
     pub pixels: PixelSampling,
+    /// The instrument's repeatability (`[measurement] repeatability_nm`): the RMS (nm, piston
+    /// and tilt removed) of the difference between two measurements of an unchanged part,
+    /// when the lab declares it.
+    pub repeatability_nm: Option<f64>,
 }
 
 /// The recipe document as written, every table typed and strict (unknown tables and keys are
@@ -90,6 +94,8 @@ pub struct MeasurementTable {
     pub after: Option<String>,
     /// How the instrument's pixels sample the surface: `point` (the default) or `area`.
     pub pixels: Option<String>,
+    /// RMS (nm) of the difference between two measurements of an unchanged part.
+    pub repeatability_nm: Option<f64>,
 }
 
 /// `[tif]`: a measured spot (`spot`, `dwell_s`) or a `model`.
@@ -265,6 +271,7 @@ impl Recipe {
                 )
             })?,
         };
+        let repeatability_nm = cx.positive(m.repeatability_nm, "[measurement] repeatability_nm")?;
 
         let pt = doc.process.clone().unwrap_or_default();
         let process = ProcessParams {
@@ -314,6 +321,7 @@ impl Recipe {
             process,
             vibration: doc.vibration,
             pixels,
+            repeatability_nm,
         })
     }
 }
@@ -538,6 +546,26 @@ k1_n_per_mm = 1476.0
         assert_ne!(text, FULL);
         let r = Recipe::parse(&text, Path::new("r.toml")).unwrap();
         assert_eq!(r.pixels, PixelSampling::Area);
+    }
+
+    #[test]
+    fn repeatability_is_optional_and_positive() {
+        let r = Recipe::parse(FULL, Path::new("r.toml")).unwrap();
+        assert_eq!(r.repeatability_nm, None);
+        let with = |v: &str| {
+            FULL.replace(
+                "before = \"before.dat\"",
+                &format!("before = \"before.dat\"\nrepeatability_nm = {v}"),
+            )
+        };
+        let r = Recipe::parse(&with("1.25"), Path::new("r.toml")).unwrap();
+        assert_eq!(r.repeatability_nm, Some(1.25));
+        for bad in ["0.0", "-1.0", "\"x\""] {
+            let e = Recipe::parse(&with(bad), Path::new("r.toml")).unwrap_err();
+            let msg = e.to_string();
+            assert!(msg.contains("r.toml"), "{msg}");
+            assert!(msg.contains("repeatability_nm"), "{msg}");
+        }
     }
 
     #[test]
