@@ -328,3 +328,104 @@ fn bands_add_in_quadrature_on_every_real_file_and_the_demo_maps() {
     }
     assert!(checked >= 40, "only {checked} maps with a pixel size");
 }
+
+/// `--minus`: two measurements of one flat (the repeatability series `01_801B`, `02_801B`)
+/// differ by the RMS a lab declares as its instrument's repeatability. The binary's figure is
+/// checked against the difference formed here on the pixels valid in both, with its
+/// least-squares plane solved from the 3 x 3 normal equations in this test (not the surface
+/// crate's form removal).
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
+fn minus_gives_the_repeatability_of_two_measurements() {
+    let a_path = shared_data::data_file("external", "pyxsurf_02_801B.dat");
+    let b_path = real("pyxsurf_01_801B.dat");
+    let read = |p: &Path| bonnetlab::io::read_surface(p).unwrap_or_else(|e| panic!("{e}"));
+    let (a, b) = (read(&a_path), read(&b_path));
+    // The difference on the common valid pixels, and its plane by normal equations.
+    let mut pts: Vec<(f64, f64, f64)> = Vec::new();
+    for ((i, j), &ha) in a.heights_nm().indexed_iter() {
+        if a.valid()[(i, j)] && b.valid()[(i, j)] {
+            pts.push((j as f64, i as f64, ha - b.heights_nm()[(i, j)]));
+        }
+    }
+    let mut n = [[0.0f64; 3]; 3];
+    let mut r = [0.0f64; 3];
+    for &(x, y, z) in &pts {
+        let v = [1.0, x, y];
+        for p in 0..3 {
+            for q in 0..3 {
+                n[p][q] += v[p] * v[q];
+            }
+            r[p] += v[p] * z;
+        }
+    }
+    // Cramer's rule on the 3 x 3 system.
+    let det = |m: &[[f64; 3]; 3]| {
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+    };
+    let d = det(&n);
+    let c: Vec<f64> = (0..3)
+        .map(|k| {
+            let mut m = n;
+            for p in 0..3 {
+                m[p][k] = r[p];
+            }
+            det(&m) / d
+        })
+        .collect();
+    let ss: f64 = pts
+        .iter()
+        .map(|&(x, y, z)| (z - c[0] - c[1] * x - c[2] * y).powi(2))
+        .sum();
+    let want = (ss / pts.len() as f64).sqrt();
+
+    let out = stats(&[
+        a_path.to_str().unwrap(),
+        "--minus",
+        b_path.to_str().unwrap(),
+        "--remove",
+        "piston,tilt",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(j["valid"].as_u64(), Some(pts.len() as u64));
+    let got = j["rms_nm"].as_f64().expect("rms_nm");
+    assert!(close(got, want, 1e-9), "rms {got} vs {want}");
+    assert!(
+        (1.5..1.8).contains(&got),
+        "the pair differs by {got} nm RMS"
+    );
+    assert_eq!(j["minus"].as_str(), b_path.to_str());
+    assert_eq!(j["format"].as_str(), Some("metropro-dat"));
+
+    // The table says what was subtracted.
+    let out = stats(&[
+        a_path.to_str().unwrap(),
+        "--minus",
+        b_path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("minus "));
+
+    // A map of another grid is refused, naming it, exit 2 and nothing on stdout.
+    let other = real("surfalize_test_1.dat");
+    let out = stats(&[a_path.to_str().unwrap(), "--minus", other.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(out.stdout.is_empty());
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("surfalize_test_1.dat") && err.contains("grid"),
+        "{err}"
+    );
+}

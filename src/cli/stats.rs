@@ -1,12 +1,14 @@
-//! `bonnetlab stats FILE [--remove TERMS] [--json] [--pvr] [--bands [F1,F2]]` (contract:
-//! shared/spec/interfaces.md).
+//! `bonnetlab stats FILE [--remove TERMS] [--json] [--pvr] [--bands [F1,F2]] [--minus FILE2]`
+//! (contract: shared/spec/interfaces.md).
 //!
 //! Reads one map (format detected by content), removes the requested terms jointly, and prints
 //! the height parameters of the residual over the valid pixels: a JSON object with `--json`
 //! (stable field order, no time stamps), a small table otherwise. With `--bands`, also the
 //! figure / MSF / fine band RMS of the same residual (`bonnetlab_spectrum::band_split`: areal
 //! Gaussian filters, bands that add up to Sq exactly; a band the map cannot resolve is null
-//! with a reason).
+//! with a reason). With `--minus`, the statistics of `FILE - FILE2` on the pixels valid in both
+//! (two maps of one grid): of two measurements of an unchanged part with piston and tilt
+//! removed, the RMS is the instrument's repeatability that a recipe may declare.
 
 use std::path::PathBuf;
 
@@ -38,6 +40,12 @@ pub struct Args {
     /// MSF convention of shared/spec/metrology.md).
     #[arg(long, value_name = "F1,F2", num_args = 0..=1, default_missing_value = "default")]
     pub bands: Option<String>,
+    /// A second map of the same grid subtracted from FILE pixel by pixel (on the pixels valid in
+    /// both) before the terms are removed. With two measurements of an unchanged part and
+    /// `--remove piston,tilt`, the RMS is the instrument's repeatability (a recipe's
+    /// `[measurement] repeatability_nm`).
+    #[arg(long, value_name = "FILE2")]
+    pub minus: Option<PathBuf>,
 }
 
 pub fn run(args: &Args) -> Result<(), CliError> {
@@ -48,8 +56,13 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         Some("default") => Some(BAND_EDGES_DEFAULT_PER_MM),
         Some(v) => super::psd::parse_pair(Some(v), "--bands")?,
     };
-    let s = read_map(&args.file)?;
-    let report = stats_report_with_bands(&args.file, &s, &terms, args.pvr, bands)?;
+    let mut s = read_map(&args.file)?;
+    if let Some(mf) = &args.minus {
+        let m = read_map(mf)?;
+        s = crate::pipeline::stats::difference_of(&args.file, &s, mf, &m)?;
+    }
+    let mut report = stats_report_with_bands(&args.file, &s, &terms, args.pvr, bands)?;
+    report.minus = args.minus.as_ref().map(|m| m.display().to_string());
     let text = if args.json {
         let mut j = serde_json::to_string(&report)
             .map_err(|e| CliError::processing(&args.file, format!("cannot encode JSON: {e}")))?;

@@ -38,6 +38,55 @@ pub struct StatsReport {
     /// With `--bands`: the band RMS object of shared/spec/interfaces.md.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bands: Option<ArealBands>,
+    /// With `--minus`: the map subtracted from `file` pixel by pixel before the terms were
+    /// removed (the statistics are of `file - minus` on the pixels valid in both).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub minus: Option<String>,
+}
+
+/// `file - minus` pixel by pixel on the pixels valid in both, for `stats --minus`: with two
+/// measurements of an unchanged part and piston and tilt removed, its RMS is the instrument's
+/// repeatability (a recipe's `[measurement] repeatability_nm`). The maps must share their grid
+/// (rows, columns and pixel size); a mismatch is the subtracted map's fault (exit 2).
+pub fn difference_of(
+    file: &Path,
+    s: &Surface,
+    minus_file: &Path,
+    m: &Surface,
+) -> Result<Surface, Error> {
+    let same_pixel = |a: Option<f64>, b: Option<f64>| match (a, b) {
+        (Some(a), Some(b)) => (a - b).abs() <= 1e-6 * a.abs().max(b.abs()),
+        (None, None) => true,
+        _ => false,
+    };
+    let mm = |v: Option<f64>| v.map_or("unknown".to_string(), |v| format!("{v} mm"));
+    if s.dim() != m.dim() || !same_pixel(s.dx_mm, m.dx_mm) || !same_pixel(s.dy_mm, m.dy_mm) {
+        return Err(Error::input(
+            minus_file,
+            format!(
+                "its grid ({} x {}, pixel {} x {}) differs from {}'s ({} x {}, pixel {} x {}); \
+                 --minus needs two maps of one grid",
+                m.rows(),
+                m.cols(),
+                mm(m.dx_mm),
+                mm(m.dy_mm),
+                file.display(),
+                s.rows(),
+                s.cols(),
+                mm(s.dx_mm),
+                mm(s.dy_mm)
+            ),
+        ));
+    }
+    let mut d = s.difference(m).map_err(|e| Error::input(minus_file, e))?;
+    d.provenance.format = s.provenance.format.clone();
+    if d.valid_count() == 0 {
+        return Err(Error::processing(
+            file,
+            format!("no pixel is valid in both it and {}", minus_file.display()),
+        ));
+    }
+    Ok(d)
 }
 
 /// Maps a library error on a readable map to the CLI's exit codes: a map with too few valid
@@ -97,6 +146,7 @@ pub fn stats_report_with_bands(
         pvr_nm: p.map(|p| p.pvr_nm),
         pvr_set: p.map(|_| PVR_SET),
         bands,
+        minus: None,
     })
 }
 

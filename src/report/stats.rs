@@ -22,6 +22,9 @@ pub fn table(r: &StatsReport) -> String {
     };
     let mut t = String::new();
     t += &format!("file      {}\n", r.file);
+    if let Some(m) = &r.minus {
+        t += &format!("minus     {m} (pixel by pixel, on the pixels valid in both)\n");
+    }
     t += &format!("format    {}\n", r.format);
     t += &format!(
         "grid      {} rows x {} cols, dx {}, dy {}\n",
