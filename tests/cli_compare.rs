@@ -405,3 +405,67 @@ fn errors_are_one_line_with_the_file_and_exit_code() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
 }
+
+/// A recipe run's declared repeatability (`[measurement] repeatability_nm`) reaches the run's
+/// calibration inside `compare`, and the report says so (null when a recipe does not declare
+/// it). The bundled original-bonnet sample, its recipe copied with absolute paths and the key
+/// added; the sample files are read, not copied or changed.
+#[test]
+fn a_recipes_declared_repeatability_reaches_its_calibration() {
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/original");
+    let text = std::fs::read_to_string(sample.join("recipe.toml")).expect("the sample recipe");
+    let mut with = text.clone();
+    for name in ["before.dat", "after.dat", "spot.dat", "path.csv"] {
+        let abs = sample.join(name);
+        with = with.replace(
+            &format!("\"{name}\""),
+            &format!("{:?}", abs.display().to_string()),
+        );
+    }
+    with = with.replace("[measurement]\n", "[measurement]\nrepeatability_nm = 0.9\n");
+    assert!(with.contains("repeatability_nm = 0.9") && !with.contains("\"before.dat\""));
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let recipe = dir.path().join("declared.toml");
+    std::fs::write(&recipe, with).expect("the recipe is written");
+    let out_dir = dir.path().join("out");
+    let out = bin()
+        .args(["compare", "--run"])
+        .arg(format!("declared={}", recipe.display()))
+        .args(["--run"])
+        .arg(format!("sample={}", sample.join("recipe.toml").display()))
+        .arg("--out")
+        .arg(&out_dir)
+        .output()
+        .expect("the binary runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j = read_json(&out_dir.join("report.json"));
+    let cal = |i: usize| &j["runs"][i]["calibration"];
+    assert_eq!(cal(0)["repeatability_nm"].as_f64(), Some(0.9));
+    assert!(
+        cal(1)["repeatability_nm"].is_null(),
+        "{}",
+        cal(1)["repeatability_nm"]
+    );
+    // The declared run's rounds made the smooth check with a bound from the declared value
+    // (2 sqrt(0.9^2 - floor^2): at most 1.8 nm); the other run's without one.
+    let bounds = |i: usize| -> Vec<serde_json::Value> {
+        cal(i)["rounds"]
+            .as_array()
+            .expect("rounds")
+            .iter()
+            .filter(|r| r["smooth_check"].is_object())
+            .map(|r| r["smooth_check"]["drift_bound_nm"].clone())
+            .collect()
+    };
+    let declared = bounds(0);
+    assert!(!declared.is_empty(), "no round made the smooth check");
+    for b in declared {
+        let b = b.as_f64().expect("a bound");
+        assert!((0.0..=1.8).contains(&b), "bound {b}");
+    }
+    assert!(bounds(1).iter().all(|b| b.is_null()));
+}

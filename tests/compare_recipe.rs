@@ -90,6 +90,7 @@ fn run(name: &str, truth: &VibrationParams, true_tif: &GaussianTif, noise_seed: 
         tif: TifSource::Gaussian(tif(1.0)),
         spot: None,
         pixels: bonnetlab::process::pixel::PixelSampling::Point,
+        repeatability_nm: None,
         path: p,
         pitch_mm: PITCH,
         bonnet: Bonnet::Original,

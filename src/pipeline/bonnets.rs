@@ -100,6 +100,8 @@ pub struct RunInput {
     pub spot: Option<Surface>,
     /// How the maps' and the spot's pixels sample the surface (`[measurement] pixels`).
     pub pixels: PixelSampling,
+    /// The instrument's declared repeatability (`[measurement] repeatability_nm`), if any.
+    pub repeatability_nm: Option<f64>,
     pub path: PathLog,
     /// Raster pitch, mm.
     pub pitch_mm: f64,
@@ -155,6 +157,7 @@ impl RunInput {
             tif: recipe.tif.clone(),
             spot,
             pixels: recipe.pixels,
+            repeatability_nm: recipe.repeatability_nm,
             path,
             pitch_mm,
             bonnet: if p.bonnet == "suppression" {
@@ -462,7 +465,7 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
             .after
             .with_heights(run.after.heights_nm() + &induced_removal(&model, &fit))
             .map_err(|e| perr(&e))?;
-        let problem = bonnetlab_calibrate::pipeline::problem_from_parts_seen(
+        let mut problem = bonnetlab_calibrate::pipeline::problem_from_parts_seen(
             &run.before,
             &corrected,
             &run.tif,
@@ -471,6 +474,7 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
             run.pixels,
         )
         .map_err(|e| ierr(&e))?;
+        problem.repeatability_nm = run.repeatability_nm;
         let cal = calibrate(&problem, &opts.calibrate).map_err(|e| perr(&e))?;
         let new_scale = effect_num(&cal, "tif_scale", "scale").unwrap_or(1.0);
         let after_reg = match cal.effects.iter().find(|e| e.kind == "registration") {
