@@ -503,6 +503,11 @@ fn map_knots(p: &Problem) -> Option<(f64, f64, usize, usize, f64, f64)> {
 /// kind's variants keep their own scores (so the data still choose among them); otherwise they
 /// too keep the smaller. The smooth map is not added to the model: what it would take stays in
 /// the residual and is reported there (`unexplained`).
+///
+/// When the lab declares its instrument's repeatability (`Problem::repeatability_nm`), the
+/// check is made only while what this map alone explains stays within the drift that
+/// repeatability allows (`run::SmoothCheck`): a smooth structure far larger than the
+/// instrument makes between two measurements is not its drift, and the rates keep their scores.
 pub fn smooth_additive_columns(p: &Problem) -> Vec<Vec<f64>> {
     let Some((x0, y0, nx, ny, hx, hy)) = map_knots(p) else {
         return Vec::new();
