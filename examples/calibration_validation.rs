@@ -9,8 +9,13 @@
 //! ```text
 //! cargo run --release --example calibration_validation -- [--runs 50] [--size 400]
 //!     [--seed 1] [--sizes 0.5,1,2] [--kinds null,registration,...] [--out reports/calibration.md]
-//!     [--no-time] [--signal] [--repeatability declared|none]
+//!     [--no-time] [--signal] [--repeatability declared|none] [--drift-nm D]
 //! ```
+//!
+//! `--drift-nm D` (default 0): the synthetic instrument also drifts between its two
+//! measurements: a smooth random field of D nm RMS (20 mm correlation) added to each after map
+//! (`SynthConfig::drift_nm`), and the declared repeatability is then the white noise and the
+//! drift in quadrature.
 //!
 //! `--repeatability` (default `declared`): each run's problem carries the synthetic instrument's
 //! repeatability as a lab would declare it (`[measurement] repeatability_nm`): the RMS of the
@@ -85,6 +90,8 @@ struct Args {
     pixels: PixelSampling,
     /// Whether each run declares the instrument's repeatability (see the header).
     declare_repeatability: bool,
+    /// The instrument's smooth drift between the two maps (nm RMS; 0: none).
+    drift_nm: f64,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -104,6 +111,7 @@ fn parse_args() -> Result<Args, String> {
         pixel_average: 1,
         pixels: PixelSampling::Point,
         declare_repeatability: true,
+        drift_nm: 0.0,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -131,6 +139,12 @@ fn parse_args() -> Result<Args, String> {
                 let v = val()?;
                 a.pixels = PixelSampling::from_name(&v)
                     .ok_or(format!("--pixels: \"point\" or \"area\", got {v}"))?
+            }
+            "--drift-nm" => {
+                a.drift_nm = val()?.parse().map_err(|e| format!("--drift-nm: {e}"))?;
+                if !(a.drift_nm >= 0.0 && a.drift_nm.is_finite()) {
+                    return Err(format!("--drift-nm must be >= 0, got {}", a.drift_nm));
+                }
             }
             "--repeatability" => {
                 a.declare_repeatability = match val()?.as_str() {
@@ -210,6 +224,7 @@ fn scenario(args: &Args, r: usize, reals: &[PathBuf]) -> SynthConfig {
         spot_offset_mm: off,
         dropout_discs: discs,
         pixel_average: args.pixel_average,
+        drift_nm: args.drift_nm,
         ..SynthConfig::realistic(mix(args.seed, 2, r as u64), n, 100.0, surface)
             .with_noise_nm(noise_b, noise_a)
             .with_round_aperture(r % 2 == 1, 90.0)
@@ -683,7 +698,7 @@ fn main() {
             let t = Instant::now();
             let res = run.problem_seen(args.pixels).and_then(|mut p| {
                 if args.declare_repeatability {
-                    p.repeatability_nm = Some(run.true_noise_floor_nm);
+                    p.repeatability_nm = Some(run.true_noise_floor_nm.hypot(args.drift_nm));
                 }
                 let cal = calibrate(&p, &Options::default())?;
                 let s = &p.samples;
@@ -799,7 +814,8 @@ fn report(
         } else {
             String::new()
         } + if args.pixels == PixelSampling::Area { " --pixels area" } else { "" },
-        if args.declare_repeatability { "" } else { " --repeatability none" },
+        (if args.declare_repeatability { String::new() } else { " --repeatability none".to_string() })
+            + &if args.drift_nm > 0.0 { format!(" --drift-nm {}", args.drift_nm) } else { String::new() },
         args.runs,
         args.size,
         args.size,
@@ -820,6 +836,10 @@ fn report(
             "; each run declares the instrument's repeatability (`repeatability_nm`: its two maps' white noise in quadrature, the RMS of the difference of two measurements of an unchanged part on this drift-free instrument)"
         } else {
             "; no repeatability declared"
+        } + &if args.drift_nm > 0.0 {
+            format!("; the instrument drifts by a smooth field of {} nm RMS (20 mm correlation) between the two maps, and the declared repeatability holds it in quadrature with the white noise", args.drift_nm)
+        } else {
+            String::new()
         },
     ));
     s.push_str(

@@ -181,3 +181,58 @@ fn runs_are_seeded_and_null_twins_share_surface_and_noise() {
     // The log is sampled at 10 Hz.
     assert!(a.path.t_s.windows(2).all(|w| w[1] - w[0] <= 0.1 + 1e-9));
 }
+
+/// The instrument's drift (`drift_nm`): the after map gains a smooth field of the requested
+/// RMS, and nothing else changes (the before map, the removal, the masks and the white noise
+/// are the drift-free twin's). Smooth: its pixel-to-pixel differences are a small fraction of
+/// its RMS, as a white field's would be about 1.4x.
+#[test]
+fn the_drift_is_a_smooth_field_added_to_the_after_map_alone() {
+    let cfg = SynthConfig {
+        rows: 120,
+        cols: 120,
+        surface: InitialSurface::PowerLaw {
+            exponent: 2.2,
+            rms_nm: 140.0,
+        },
+        noise_nm: 1.0,
+        ..SynthConfig::default()
+    };
+    let still = generate(&cfg).unwrap();
+    let drifting = generate(&SynthConfig {
+        drift_nm: 1.5,
+        drift_correlation_mm: 20.0,
+        ..cfg.clone()
+    })
+    .unwrap();
+    assert_eq!(still.before.heights_nm(), drifting.before.heights_nm());
+    assert_eq!(still.after.valid(), drifting.after.valid());
+    assert_eq!(still.true_removal_nm, drifting.true_removal_nm);
+    // On the valid pixels (the map's dropouts hold no height).
+    let d = drifting.after.heights_nm() - still.after.heights_nm();
+    let ok = still.after.valid();
+    let vals: Vec<f64> = d
+        .iter()
+        .zip(ok.iter())
+        .filter(|(_, v)| **v)
+        .map(|(h, _)| *h)
+        .collect();
+    let n = vals.len() as f64;
+    assert!(n > 0.9 * d.len() as f64);
+    let mean = vals.iter().sum::<f64>() / n;
+    let rms = (vals.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+    assert!((rms - 1.5).abs() < 0.05 * 1.5, "drift RMS {rms}");
+    let mut steps = Vec::new();
+    for i in 0..d.nrows() {
+        for j in 1..d.ncols() {
+            if ok[(i, j)] && ok[(i, j - 1)] {
+                steps.push(d[(i, j)] - d[(i, j - 1)]);
+            }
+        }
+    }
+    let step_rms = (steps.iter().map(|v| v * v).sum::<f64>() / steps.len() as f64).sqrt();
+    assert!(
+        step_rms < 0.1 * rms,
+        "pixel steps {step_rms} nm vs RMS {rms} nm"
+    );
+}

@@ -172,6 +172,8 @@ pub fn synth_config(spec: &RecipeRunSpec) -> SynthConfig {
         dropout_disc_radius_mm: (0.5, 1.0),
         setup_tilt_nm: 10.0,
         setup_piston_nm: 5.0,
+        drift_nm: 0.0,
+        drift_correlation_mm: 20.0,
         aperture_diameter_mm: None,
         effects: spec.effects.clone(),
     }

@@ -105,7 +105,7 @@ fn rms_where(a: &Array2<f64>, inside: impl Fn(usize, usize) -> bool) -> f64 {
 }
 
 /// Scales `a` to RMS `rms_nm` (about its mean) over the whole grid.
-fn scale_to(a: &mut Array2<f64>, rms_nm: f64) {
+pub(crate) fn scale_to(a: &mut Array2<f64>, rms_nm: f64) {
     let r = rms_where(a, |_, _| true);
     if r > 0.0 {
         a.mapv_inplace(|v| v * rms_nm / r);

@@ -241,6 +241,12 @@ pub struct SynthConfig {
     /// Set-up tilt of the after map (nm across the map) and piston (nm).
     pub setup_tilt_nm: f64,
     pub setup_piston_nm: f64,
+    /// The instrument's smooth drift between the two measurements (air, temperature,
+    /// alignment): a smooth random field of this RMS (nm over the map, before its plane is
+    /// taken out) and Gaussian correlation length `drift_correlation_mm`, added to the after
+    /// map only. 0 (the default): a drift-free instrument, and no random draw is made.
+    pub drift_nm: f64,
+    pub drift_correlation_mm: f64,
     /// Clear aperture: a disc of this diameter (mm) about the map centre; pixels outside it
     /// are invalid in both maps (a round part). `None`: the whole map is the part.
     pub aperture_diameter_mm: Option<f64>,
@@ -277,6 +283,8 @@ impl Default for SynthConfig {
             dropout_disc_radius_mm: (0.5, 2.0),
             setup_tilt_nm: 15.0,
             setup_piston_nm: 7.0,
+            drift_nm: 0.0,
+            drift_correlation_mm: 20.0,
             aperture_diameter_mm: None,
             effects: Vec::new(),
         }
@@ -344,6 +352,8 @@ impl SynthConfig {
             dropout_disc_radius_mm: (0.5, 2.0),
             setup_tilt_nm: 15.0,
             setup_piston_nm: 7.0,
+            drift_nm: 0.0,
+            drift_correlation_mm: 20.0,
             aperture_diameter_mm: None,
             effects: Vec::new(),
         }
@@ -1090,6 +1100,12 @@ pub fn generate_with(
         }
         h
     });
+    if cfg.drift_nm > 0.0 {
+        // Its own stream, so a run with drift keeps its drift-free twin's noise and dropouts.
+        let mut f = field::smooth_random(&mut stream(cfg.seed, 7), &grid, cfg.drift_correlation_mm);
+        field::scale_to(&mut f, cfg.drift_nm);
+        after += &f;
+    }
     let mut vb = Array2::from_elem((cfg.rows, cfg.cols), true);
     let mut va = Array2::from_elem((cfg.rows, cfg.cols), true);
     let mut noise_rng = stream(cfg.seed, 2);
