@@ -103,7 +103,44 @@ fn a_rate_map_far_above_the_declared_repeatability_stands() {
     // The declared value is echoed in the JSON, beside each round's check.
     let json = serde_json::to_value(&declared).expect("the calibration serialises");
     assert_eq!(json["repeatability_nm"].as_f64(), Some(floor));
+    assert_eq!(json["repeatability_used"].as_bool(), Some(true));
+    assert!(
+        json["repeatability_note"].is_null(),
+        "{}",
+        json["repeatability_note"]
+    );
     let sc = &json["rounds"][0]["smooth_check"];
     assert_eq!(sc["applied"].as_bool(), Some(false), "{sc}");
     assert!(sc["map_rms_nm"].as_f64().is_some_and(|v| v > 2.0), "{sc}");
+}
+
+/// A declared value well below the run's white floor contradicts it (these maps are noisier
+/// than the measurements it came from): it is not used, the JSON says why with both values,
+/// and the selection is the undeclared one, check for check.
+#[test]
+fn a_repeatability_below_the_runs_noise_is_not_used_and_says_why() {
+    let run = rate_map_run();
+    let floor = run.true_noise_floor_nm;
+    let open = calibrate_declared(&run, None);
+    let low = calibrate_declared(&run, Some(0.5 * floor));
+    assert!(!low.repeatability_used);
+    let note = low
+        .repeatability_note
+        .as_deref()
+        .expect("a note says why the value was not used");
+    assert!(
+        note.contains(&format!("{:.4} nm", 0.5 * floor)) && note.contains("noisier"),
+        "{note}"
+    );
+    assert!(!open.repeatability_used && open.repeatability_note.is_none());
+    // The same selection as undeclared: the map turned down, the check made without a bound.
+    assert_eq!(kinds(&low), kinds(&open));
+    let check = low.rounds[0]
+        .smooth_check
+        .expect("the round made the check");
+    assert!(check.applied && check.drift_bound_nm.is_none(), "{check:?}");
+    assert_eq!(
+        low.final_.residual_rms_nm.to_bits(),
+        open.final_.residual_rms_nm.to_bits()
+    );
 }

@@ -94,6 +94,16 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
         fixed(cal.noise_floor_band_per_mm[0], 3),
         fixed(cal.noise_floor_band_per_mm[1], 3)
     ));
+    if let Some(r) = cal.repeatability_nm {
+        page.note(&match &cal.repeatability_note {
+            Some(why) => format!("Repeatability: {why}."),
+            None => format!(
+                "Repeatability: {} nm RMS as declared ([measurement] repeatability_nm); it bounds the smooth \
+                 difference the instrument alone makes between the two maps (rounds' smooth check).",
+                fixed(r, 4)
+            ),
+        });
+    }
     page.section("Final residual per band");
     let mut t = Table::new([
         "band",

@@ -151,6 +151,32 @@ pub struct SmoothCheck {
 /// 0.87 to 1.64 nm RMS, a spread of 1.9 about the same instrument on the same day.
 pub const DRIFT_SPREAD: f64 = 2.0;
 
+/// A declared repeatability below this share of the run's white-noise floor contradicts the
+/// run: two measurements the lab calls repeatable to that value cannot differ by more white
+/// noise alone. The floor's estimate is 0.95-0.98 of the truth on the harness's null runs, so
+/// a value within 10 % below it is read as a repeatability with no smooth part.
+pub const REPEATABILITY_TOLERANCE: f64 = 0.9;
+
+/// The declared repeatability as the selection can use it against the run's white-noise floor
+/// `floor_nm` (of `before - after`): the value, or `None` with the reason when it contradicts
+/// the run (below `REPEATABILITY_TOLERANCE` of the floor: the maps are noisier than the
+/// instrument the value was measured on, so it says nothing of this run's drift and the smooth
+/// check is made as when nothing is declared).
+fn usable_repeatability(declared: Option<f64>, floor_nm: f64) -> (Option<f64>, Option<String>) {
+    match declared {
+        Some(r) if r < REPEATABILITY_TOLERANCE * floor_nm => (
+            None,
+            Some(format!(
+                "the declared repeatability ({r:.4} nm) is below this run's white-noise floor \
+                 ({floor_nm:.4} nm RMS of before - after): these maps are noisier than the \
+                 measurements it was taken from, so it was not used and rate candidates were \
+                 checked against a smooth difference between the maps as when nothing is declared"
+            )),
+        ),
+        other => (other, None),
+    }
+}
+
 impl SmoothCheck {
     /// The check for a smooth map that explains `alone` (held-out) of a residual on `n`
     /// pixels, with the declared repeatability `repeatability_nm` and the run's white-noise
@@ -186,6 +212,11 @@ pub struct Calibration {
     /// The instrument's repeatability as declared (`[measurement] repeatability_nm`; nm RMS of
     /// the difference of two measurements of an unchanged part), or null.
     pub repeatability_nm: Option<f64>,
+    /// Whether the selection used the declared repeatability (false when none is declared or
+    /// when it contradicts the run, `repeatability_note` says why).
+    pub repeatability_used: bool,
+    /// Why a declared repeatability was not used, or null.
+    pub repeatability_note: Option<String>,
     pub effects: Vec<EffectReport>,
     pub unexplained: Vec<Unexplained>,
     /// Strongly correlated parameters of different accepted effects (joint refit).
@@ -482,6 +513,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
     // The floor the selection settles against (the maps not yet registered); reported below
     // from the registered removal.
     let noise = floor_of(p, &band, &ev).0;
+    let (repeatability, repeatability_note) = usable_repeatability(p.repeatability_nm, noise);
     // Selection scores the full-band residual (held-out sums of squares and the settle test):
     // an effect's signal can sit partly in the fine band (a feed covariate at line ends and
     // step-overs), so taking the fine band out before scoring hid it; the bands are reported
@@ -544,8 +576,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             // What the smooth map alone takes from the held-out sum of squares, against what
             // the instrument's declared repeatability allows.
             let alone = (!smooth.is_empty()).then(|| holdout(&ev, smooth, &sp, &bg));
-            let check =
-                alone.map(|a| SmoothCheck::of(&a, ev.w.iter().sum(), p.repeatability_nm, noise));
+            let check = alone.map(|a| SmoothCheck::of(&a, ev.w.iter().sum(), repeatability, noise));
             smooth_check = check;
             if trace {
                 if let Some(c) = check {
@@ -953,6 +984,8 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         process_band: band,
         pixels: p.tif.pixels().name().to_string(),
         repeatability_nm: p.repeatability_nm,
+        repeatability_used: repeatability.is_some(),
+        repeatability_note,
         effects: reports,
         unexplained,
         correlations,
@@ -1318,6 +1351,23 @@ mod tests {
         };
         let c = SmoothCheck::of(&lost, 100.0, Some(0.7), 0.75);
         assert!(c.map_rms_nm == 0.0 && c.applied, "{c:?}");
+    }
+
+    /// A declaration within the floor's estimate of it is used; one clearly below the run's
+    /// white floor is not, and says why.
+    #[test]
+    fn a_repeatability_below_the_runs_floor_is_not_used() {
+        assert_eq!(usable_repeatability(None, 1.0), (None, None));
+        assert_eq!(usable_repeatability(Some(1.3), 1.0), (Some(1.3), None));
+        // 0.95 of the floor: the floor's own estimate can be 3-5 % off.
+        assert_eq!(usable_repeatability(Some(0.95), 1.0), (Some(0.95), None));
+        let (used, note) = usable_repeatability(Some(0.7), 1.0);
+        let note = note.expect("a note");
+        assert!(used.is_none(), "{note}");
+        assert!(
+            note.contains("0.7000 nm") && note.contains("1.0000 nm"),
+            "{note}"
+        );
     }
 
     fn cand(kind: &'static str, ncols: usize) -> Candidate {
