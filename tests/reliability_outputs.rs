@@ -619,3 +619,51 @@ fn sample_generators_publish_as_a_set() {
     );
     assert_eq!(listing(&dir), top, "no staging or temporary file left");
 }
+
+/// A command with several outputs publishes none of them when one cannot be written (before,
+/// the `--out` directory or the first file was published, then the next failed): `dwell` and
+/// `vibration` with `--out DIR --json` into a directory that does not exist, and `psd` with a
+/// CSV and a plot there. Exit 2 naming the unwritable file, and nothing created or changed.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
+fn one_unwritable_output_publishes_none_of_the_others() {
+    let d = tempfile::tempdir().unwrap();
+    let missing = d.path().join("no_such_dir").join("x.json");
+    let out = d.path().join("nested").join("out");
+    let mut cmds: Vec<(&str, Command)> = Vec::new();
+    let mut c = bin();
+    c.arg("dwell").arg(dwell_case()).arg("--out").arg(&out);
+    c.arg("--json").arg(&missing);
+    cmds.push(("dwell", c));
+    let mut c = bin();
+    c.args(["vibration", "--out"]).arg(&out);
+    c.arg("--json").arg(&missing);
+    cmds.push(("vibration", c));
+    let csv = d.path().join("psd.csv");
+    let mut c = bin();
+    c.arg("psd").arg(sample_map()).arg("--csv").arg(&csv);
+    c.arg("--plot")
+        .arg(d.path().join("no_such_dir").join("p.svg"));
+    cmds.push(("psd", c));
+    for (name, c) in cmds {
+        let o = run(c, Stdio::piped());
+        assert_eq!(o.status.code(), Some(2), "{name}: {}", err(&o));
+        one_line(&o, "no_such_dir");
+        assert!(o.stdout.is_empty(), "{name} printed: {:?}", o.stdout);
+        let left = listing(d.path());
+        assert!(left.is_empty(), "{name} left {left:?}");
+    }
+    // An existing --out directory keeps what it had, and nothing is added.
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("keep.txt"), b"old").unwrap();
+    let mut c = bin();
+    c.arg("dwell").arg(dwell_case()).arg("--out").arg(&out);
+    c.arg("--json").arg(&missing);
+    let o = run(c, Stdio::piped());
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    assert_eq!(listing(&out), vec!["keep.txt".to_string()]);
+    assert_eq!(std::fs::read(out.join("keep.txt")).unwrap(), b"old");
+}

@@ -36,19 +36,21 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     let text = serde_json::to_string_pretty(&cal)
         .map_err(|e| CliError::processing(&args.recipe, e))?
         + "\n";
+    // calibration.json, report.html and the --json file are published together or not at all.
+    let mut outputs = super::Outputs::default();
+    if let Some(out) = &args.json {
+        outputs.file(out, text.as_bytes())?;
+    }
     if let Some(dir) = &args.out {
-        // calibration.json and report.html are published together or not at all.
         let werr = super::write_error;
+        let html = report_html(&cal, &args.recipe).map_err(|e| CliError::processing(dir, e))?;
         let mut set = crate::report::write::Set::begin(dir).map_err(werr)?;
         set.bytes("calibration.json", text.as_bytes())
             .map_err(werr)?;
-        let html = report_html(&cal, &args.recipe).map_err(|e| CliError::processing(dir, e))?;
         set.bytes("report.html", html.as_bytes()).map_err(werr)?;
-        set.commit().map_err(werr)?;
+        outputs.set(set);
     }
-    if let Some(out) = &args.json {
-        super::emit(out, text.as_bytes())?;
-    }
+    outputs.publish()?;
     let json_on_stdout = match &args.json {
         Some(out) => super::is_stdout(out),
         None => args.out.is_none(),

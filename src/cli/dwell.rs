@@ -100,12 +100,20 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     );
     bar.finish_and_clear();
     let solved = solved?;
-    if let Some(dir) = &args.out {
-        write_outputs(dir, &solved)?;
-    }
+    // The --out files and the --json file are published together or not at all.
+    let mut outputs = super::Outputs::default();
     let report = &solved.report;
+    if let Some(p) = &args.json {
+        let text = serde_json::to_string_pretty(report)
+            .map_err(|e| CliError::processing(p, format!("JSON: {e}")))?;
+        outputs.file(p, format!("{text}\n").as_bytes())?;
+    }
+    if let Some(dir) = &args.out {
+        outputs.set(stage_outputs(dir, &solved)?);
+    }
+    outputs.publish()?;
     match &args.json {
-        Some(p) => super::emit_json(p, report)?,
+        Some(_) => {}
         None if args.out.is_none() => {
             let text = serde_json::to_string_pretty(report)
                 .map_err(|e| CliError::processing(&args.case, e))?;
@@ -135,10 +143,10 @@ fn written(args: &Args) -> Vec<String> {
     wrote
 }
 
-/// Writes the `--out` files as one set (`report::write::Set`): all are staged under the
-/// directory's lock and published together, so a failure part-way leaves the directory as it
-/// was and two runs never mix their files.
-fn write_outputs(dir: &Path, solved: &SolvedCase) -> Result<(), CliError> {
+/// Stages the `--out` files as one set (`report::write::Set`): all are staged under the
+/// directory's lock and published together by the caller, so a failure part-way leaves the
+/// directory as it was and two runs never mix their files.
+fn stage_outputs(dir: &Path, solved: &SolvedCase) -> Result<report::write::Set, CliError> {
     let werr = super::write_error;
     let maps = solved.maps(dir)?;
     let mut set = report::write::Set::begin(dir).map_err(werr)?;
@@ -199,5 +207,5 @@ fn write_outputs(dir: &Path, solved: &SolvedCase) -> Result<(), CliError> {
         "residual in the clear aperture (piston, tilt removed)",
         "nm",
     )?;
-    set.commit().map_err(werr)
+    Ok(set)
 }

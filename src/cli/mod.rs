@@ -144,6 +144,52 @@ pub fn emit(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
     }
 }
 
+/// Every output of a command, published together: single files are staged whole beside their
+/// destinations (`bonnetlab_io::atomic::stage`) and a `--out` directory's files in its staging
+/// area (`report::write::Set`), and nothing is published until every one is staged. So an
+/// output that cannot be written (a read-only or missing directory, a special file) leaves every
+/// other output as it was. What goes to stdout (`-`) is printed after the files.
+#[derive(Default)]
+pub struct Outputs {
+    set: Option<crate::report::write::Set>,
+    files: Vec<(std::path::PathBuf, bonnetlab_io::atomic::Staged)>,
+    stdout: Vec<u8>,
+}
+
+impl Outputs {
+    /// Adds the `--out` directory's set (staged by the caller, published by [`Outputs::publish`]).
+    pub fn set(&mut self, set: crate::report::write::Set) {
+        self.set = Some(set);
+    }
+
+    /// Stages one output: a file (checked and written whole now, published later), or stdout
+    /// when `path` is `-`.
+    pub fn file(&mut self, path: &Path, bytes: &[u8]) -> Result<(), CliError> {
+        if is_stdout(path) {
+            self.stdout.extend_from_slice(bytes);
+            return Ok(());
+        }
+        let staged =
+            bonnetlab_io::atomic::stage(path, bytes).map_err(|e| CliError::output(path, &e))?;
+        self.files.push((path.to_path_buf(), staged));
+        Ok(())
+    }
+
+    /// Publishes the set, then the files (one rename each), then prints what goes to stdout.
+    pub fn publish(self) -> Result<(), CliError> {
+        if let Some(set) = self.set {
+            set.commit().map_err(write_error)?;
+        }
+        for (path, staged) in self.files {
+            staged.commit().map_err(|e| CliError::output(&path, &e))?;
+        }
+        if !self.stdout.is_empty() {
+            write_stdout(&self.stdout)?;
+        }
+        Ok(())
+    }
+}
+
 /// Writes a value as pretty JSON with a trailing newline through [`emit`].
 pub fn emit_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Result<(), CliError> {
     let mut text = serde_json::to_string_pretty(value)

@@ -143,10 +143,11 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         pixel_mm: super::compare::pixel_size(args.pixel_mm, args.pixel_mm_y)?,
     };
     let report = psd(file, &opts)?;
+    // The CSV and the plot are published together or not at all.
+    let mut outputs = super::Outputs::default();
     if let Some(out) = &args.csv {
         let text = report::psd::csv_text(&report);
-        bonnetlab_io::atomic::write_atomic(out, text.as_bytes())
-            .map_err(|e| CliError::output(out, &e))?;
+        outputs.file(out, text.as_bytes())?;
     }
     if let Some(out) = &args.plot {
         let bytes = report::psd::plot_bytes(
@@ -156,8 +157,9 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             plot_kind(out)? == "svg",
         )
         .map_err(|e| CliError::processing(out, e))?;
-        bonnetlab_io::atomic::write_atomic(out, &bytes).map_err(|e| CliError::output(out, &e))?;
+        outputs.file(out, &bytes)?;
     }
+    outputs.publish()?;
     let text = if args.json {
         serde_json::to_string(&report)
             .map_err(|e| CliError::processing(file, format!("JSON: {e}")))?

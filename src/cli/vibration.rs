@@ -47,11 +47,19 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     let recipe = args.recipe.as_deref().zip(text.as_deref());
     let v = response(recipe, args.bonnet.as_deref(), args.duration_s)?;
 
+    // Everything is computed first; the --out files (one set, `report::write::Set`) and the
+    // --json file are then published together or not at all, before the summary.
+    let mut published = super::Outputs::default();
+    if let Some(json_path) = &args.json {
+        let text = if v.outs.len() == 1 {
+            serde_json::to_string_pretty(&v.outs[0])
+        } else {
+            serde_json::to_string_pretty(&v.outs)
+        }
+        .map_err(|e| CliError::processing(json_path, e))?;
+        published.file(json_path, format!("{text}\n").as_bytes())?;
+    }
     if let Some(dir) = &args.out {
-        // Written before the JSON or summary, so a failure here emits nothing. Everything is
-        // computed first, then the files are published as one set
-        // (`report::write::Set`): a failure part-way leaves the directory as it was, and two
-        // runs into one directory never mix their files.
         let outputs = v.outputs(args.duration_s, args.seed, &dir.join("timeseries.csv"))?;
         let werr = super::write_error;
         let mut set = report::write::Set::begin(dir).map_err(werr)?;
@@ -70,17 +78,11 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         }
         let csv = report::vibration::timeseries_csv(&outputs.timeseries);
         set.bytes("timeseries.csv", &csv).map_err(werr)?;
-        set.commit().map_err(werr)?;
+        published.set(set);
     }
+    published.publish()?;
 
     if let Some(json_path) = &args.json {
-        let text = if v.outs.len() == 1 {
-            serde_json::to_string_pretty(&v.outs[0])
-        } else {
-            serde_json::to_string_pretty(&v.outs)
-        }
-        .map_err(|e| CliError::processing(json_path, e))?;
-        super::emit(json_path, format!("{text}\n").as_bytes())?;
         if !super::is_stdout(json_path) {
             let mut wrote = vec![json_path.display().to_string()];
             wrote.extend(args.out.iter().map(|d| format!("{}/", d.display())));

@@ -86,6 +86,26 @@ pub fn write_atomic_with<F>(path: &Path, fill: F) -> io::Result<()>
 where
     F: FnOnce(&mut dyn Write) -> io::Result<()>,
 {
+    stage_with(path, fill)?.commit()
+}
+
+/// One output file written whole beside its destination and not yet published: a command
+/// with several outputs stages every one of them before it publishes any, so a destination
+/// that cannot be written leaves all of them as they were. Dropped uncommitted, it leaves
+/// nothing behind.
+#[derive(Debug)]
+pub struct Staged {
+    tmp: PathBuf,
+    dest: PathBuf,
+    committed: bool,
+}
+
+/// Stages whatever `fill` writes (through a buffered writer) as the next content of `path`;
+/// the destination is checked as [`write_atomic`] checks it, and nothing changes there yet.
+pub fn stage_with<F>(path: &Path, fill: F) -> io::Result<Staged>
+where
+    F: FnOnce(&mut dyn Write) -> io::Result<()>,
+{
     let dest = resolve_destination(path)?;
     let name = dest
         .file_name()
@@ -95,20 +115,39 @@ where
     let dir = parent_dir(&dest);
     remove_stale_temps(&dir, Some(&name));
     let (tmp, file) = create_temp(&dir, &name)?;
-    let result = (|| {
-        let mut w = BufWriter::new(file);
-        fill(&mut w)?;
-        let file = w.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        drop(file);
-        fs::rename(&tmp, &dest)
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
-    } else {
-        sync_dir(&dir);
+    let staged = Staged {
+        tmp,
+        dest,
+        committed: false,
+    };
+    let mut w = BufWriter::new(file);
+    fill(&mut w)?;
+    let file = w.into_inner().map_err(|e| e.into_error())?;
+    file.sync_all()?;
+    Ok(staged)
+}
+
+/// Stages `bytes` as the next content of `path` (see [`stage_with`]).
+pub fn stage(path: &Path, bytes: &[u8]) -> io::Result<Staged> {
+    stage_with(path, |w| w.write_all(bytes))
+}
+
+impl Staged {
+    /// Publishes the staged content over the destination (one rename).
+    pub fn commit(mut self) -> io::Result<()> {
+        fs::rename(&self.tmp, &self.dest)?;
+        self.committed = true;
+        sync_dir(&parent_dir(&self.dest));
+        Ok(())
     }
-    result
+}
+
+impl Drop for Staged {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = fs::remove_file(&self.tmp);
+        }
+    }
 }
 
 fn parent_dir(p: &Path) -> PathBuf {
@@ -260,7 +299,10 @@ pub struct OutputSet {
     /// (name relative to dir, final destination) in write order.
     files: Vec<(PathBuf, PathBuf)>,
     committed: bool,
-    _lock: DirLock,
+    /// The outermost directory `begin` created, if it created any (an uncommitted set removes
+    /// what it created again).
+    created: Option<PathBuf>,
+    lock: Option<DirLock>,
 }
 
 impl OutputSet {
@@ -274,8 +316,19 @@ impl OutputSet {
                 )));
             }
         }
+        let created = dir
+            .ancestors()
+            .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
+            .last()
+            .map(Path::to_path_buf);
         fs::create_dir_all(dir)?;
-        let lock = DirLock::acquire(dir)?;
+        let lock = match DirLock::acquire(dir) {
+            Ok(l) => l,
+            Err(e) => {
+                remove_created(dir, created.as_deref());
+                return Err(e);
+            }
+        };
         remove_stale_temps(dir, None);
         let pid = std::process::id();
         let staging = loop {
@@ -284,7 +337,11 @@ impl OutputSet {
             match fs::create_dir(&s) {
                 Ok(()) => break s,
                 Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
-                Err(e) => return Err(e),
+                Err(e) => {
+                    drop(lock);
+                    remove_created(dir, created.as_deref());
+                    return Err(e);
+                }
             }
         };
         Ok(OutputSet {
@@ -292,7 +349,8 @@ impl OutputSet {
             staging,
             files: Vec::new(),
             committed: false,
-            _lock: lock,
+            created,
+            lock: Some(lock),
         })
     }
 
@@ -375,6 +433,21 @@ impl Drop for OutputSet {
     fn drop(&mut self) {
         if !self.committed {
             let _ = fs::remove_dir_all(&self.staging);
+            // The lock goes first; a directory this set created is then empty and goes too
+            // (`remove_dir` never removes one that holds anything).
+            self.lock.take();
+            remove_created(&self.dir, self.created.as_deref());
+        }
+    }
+}
+
+/// Removes `dir` and its parents up to `outermost` (the directories a set created), as long as
+/// each is empty; nothing when it created none.
+fn remove_created(dir: &Path, outermost: Option<&Path>) {
+    let Some(top) = outermost else { return };
+    for d in dir.ancestors() {
+        if fs::remove_dir(d).is_err() || d == top {
+            break;
         }
     }
 }
@@ -498,6 +571,31 @@ mod tests {
         let set = OutputSet::begin(d.path()).unwrap();
         assert!(!other.exists(), "OutputSet::begin cleans every stale temp");
         drop(set);
+    }
+
+    /// A set dropped uncommitted removes the directories it created (and only those); a
+    /// staged file dropped uncommitted leaves nothing, committed it replaces the destination.
+    #[test]
+    fn uncommitted_outputs_leave_nothing_behind() {
+        let d = tempfile::tempdir().unwrap();
+        let out = d.path().join("a").join("b").join("out");
+        let mut set = OutputSet::begin(&out).unwrap();
+        set.write("x.json", b"{}").unwrap();
+        drop(set);
+        assert!(!d.path().join("a").exists());
+        std::fs::create_dir(d.path().join("kept")).unwrap();
+        let set = OutputSet::begin(&d.path().join("kept").join("new")).unwrap();
+        drop(set);
+        assert!(d.path().join("kept").is_dir() && !d.path().join("kept/new").exists());
+
+        let p = d.path().join("f.txt");
+        std::fs::write(&p, b"old").unwrap();
+        drop(stage(&p, b"new").unwrap());
+        assert_eq!(fs::read(&p).unwrap(), b"old");
+        assert!(leftovers(d.path()).is_empty());
+        stage(&p, b"new").unwrap().commit().unwrap();
+        assert_eq!(fs::read(&p).unwrap(), b"new");
+        assert!(leftovers(d.path()).is_empty());
     }
 
     #[test]
