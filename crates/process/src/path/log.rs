@@ -75,6 +75,8 @@ pub fn read_path_from(r: impl std::io::Read, name: &Path) -> Result<PathLog, Pro
     };
     let names = ["t_s", "x_mm", "y_mm"];
     let mut p = PathLog::default();
+    // The line of each sample, for the sampling-rate check below.
+    let mut lines: Vec<usize> = Vec::new();
     for (k, rec) in rdr.records().enumerate() {
         let line = rec
             .as_ref()
@@ -122,11 +124,47 @@ pub fn read_path_from(r: impl std::io::Read, name: &Path) -> Result<PathLog, Pro
         p.t_s.push(v[0]);
         p.x_mm.push(v[1]);
         p.y_mm.push(v[2]);
+        lines.push(line);
     }
     if p.len() < 2 {
         return Err(err(1, "a path log needs at least two samples".into()));
     }
+    check_rate(&p.t_s).map_err(|(k, what)| err(lines[k], what))?;
     Ok(p)
+}
+
+/// The slowest sampling a path log may have (shared/spec/interfaces.md: at least 5 Hz). Dwell is
+/// the time between samples, so a slower log leaves the path between them unknown: a 1 Hz log of
+/// the sample run moves 10 mm between samples and its simulation is meaningless.
+pub const MIN_RATE_HZ: f64 = 5.0;
+
+/// Checks the log's sampling rate: the median interval between samples must be at most
+/// 1 / [`MIN_RATE_HZ`] (a few longer intervals, a pause or a lift, are allowed). On failure, the
+/// index of the first sample that ends a longer interval and what is wrong.
+fn check_rate(t_s: &[f64]) -> Result<(), (usize, String)> {
+    let mut dt: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    let Some(&first_long) = dt.iter().find(|&&d| d > 1.0 / MIN_RATE_HZ * (1.0 + 1e-9)) else {
+        return Ok(());
+    };
+    let k = dt.iter().position(|&d| d == first_long).unwrap_or(0) + 1;
+    dt.sort_by(f64::total_cmp);
+    let median = if dt.len() % 2 == 1 {
+        dt[dt.len() / 2]
+    } else {
+        0.5 * (dt[dt.len() / 2 - 1] + dt[dt.len() / 2])
+    };
+    if median <= 1.0 / MIN_RATE_HZ * (1.0 + 1e-9) {
+        return Ok(());
+    }
+    Err((
+        k,
+        format!(
+            "the log is sampled at {:.3} Hz (median interval {median} s; this sample comes \
+             {first_long} s after the one before): a path log must be sampled at {MIN_RATE_HZ} Hz \
+             or more",
+            1.0 / median
+        ),
+    ))
 }
 
 /// Checks that every sample lies within `x_mm` x `y_mm` (the part) widened by `margin_mm` (the
@@ -198,12 +236,24 @@ mod tests {
 
     #[test]
     fn reads_any_column_order_and_ignores_extras() {
-        let p = read("x_mm,feed,t_s,y_mm\n1,9,0,2\n3,9,0.5,4\n").unwrap();
-        assert_eq!(p.t_s, vec![0.0, 0.5]);
+        let p = read("x_mm,feed,t_s,y_mm\n1,9,0,2\n3,9,0.125,4\n").unwrap();
+        assert_eq!(p.t_s, vec![0.0, 0.125]);
         assert_eq!(p.x_mm, vec![1.0, 3.0]);
         assert_eq!(p.y_mm, vec![2.0, 4.0]);
         let back = read(&path_to_csv(&p)).unwrap();
         assert_eq!(back, p);
+    }
+
+    /// A log slower than 5 Hz is refused at the first sample after a long interval; a 5 Hz
+    /// log, and a fast one with a pause, are read.
+    #[test]
+    fn a_log_slower_than_5_hz_is_refused() {
+        let slow = "t_s,x_mm,y_mm\n0,0,0\n0.1,1,0\n1.1,2,0\n2.1,3,0\n3.1,4,0\n";
+        let e = read(slow).unwrap_err().to_string();
+        assert!(e.contains("line 4") && e.contains("1.000 Hz"), "{e}");
+        assert!(read("t_s,x_mm,y_mm\n0,0,0\n0.2,1,0\n0.4,2,0\n0.6,3,0\n").is_ok());
+        let pause = "t_s,x_mm,y_mm\n0,0,0\n0.1,1,0\n5.1,1,0\n5.2,2,0\n";
+        assert!(read(pause).is_ok());
     }
 
     #[test]
@@ -254,7 +304,7 @@ mod tests {
 
     #[test]
     fn extent_check_names_the_first_sample_outside() {
-        let p = read("t_s,x_mm,y_mm\n0,0,0\n1,50,0\n2,80,0\n").unwrap();
+        let p = read("t_s,x_mm,y_mm\n0,0,0\n0.1,50,0\n0.2,80,0\n").unwrap();
         check_extent(&p, Path::new("p.csv"), (0.0, 60.0), (0.0, 60.0), 25.0).unwrap();
         let e = check_extent(&p, Path::new("p.csv"), (0.0, 60.0), (0.0, 60.0), 10.0)
             .unwrap_err()
