@@ -371,6 +371,16 @@ fn usage_errors_are_one_line() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
     one_line(&o, "between 0 and 1000");
+    // A missing argument is named (clap lists it below the sentence; it was cut off).
+    let o = bin().args(["stats"]).output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    one_line(&o, "were not provided: <FILE>");
+    let o = bin()
+        .args(["psd", "x.dat", "--pixel-mm-y", "0.1"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    one_line(&o, "--pixel-mm");
 }
 
 /// Issue #18: `simulate --out` and `calibrate --out` are published as a set under the

@@ -64,7 +64,8 @@ fn batch_over_a_directory_and_a_manifest() {
     let manifest = dir.path().join("list.txt");
     std::fs::write(&manifest, format!("# maps\n{}\n\nmissing.dat\n", names[1])).unwrap();
     let o = bin().arg("batch").arg(&manifest).output().unwrap();
-    assert_eq!(o.status.code(), Some(1));
+    // The one failure is bad input: exit 2, as `stats missing.dat` would.
+    assert_eq!(o.status.code(), Some(2));
     let got = lines(&o.stdout);
     assert_eq!(got.len(), 2);
     assert!(got[0]["error"].is_null() && got[0]["rms_nm"].is_number());
@@ -80,4 +81,42 @@ fn batch_over_a_directory_and_a_manifest() {
         .unwrap();
     assert!(o.status.success());
     assert_eq!(lines(&o.stdout).len(), 1);
+
+    // A map without a pixel size keeps its statistics under --pitch-mm; the ripple is absent
+    // with its reason (it was a failed map before).
+    let nopx = dir.path().join("nopx.csv");
+    let grid: String = (0..12)
+        .map(|i| {
+            (0..12)
+                .map(|j| format!("{}", ((i * 7 + j * 3) % 5) as f64))
+                .collect::<Vec<_>>()
+                .join(",")
+                + "\n"
+        })
+        .collect();
+    std::fs::write(&nopx, grid).unwrap();
+    let o = bin()
+        .args(["batch", "--pitch-mm", "3"])
+        .arg(&nopx)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let got = lines(&o.stdout);
+    assert!(
+        got[0]["rms_nm"].as_f64().is_some_and(|v| v > 0.0),
+        "{}",
+        got[0]
+    );
+    assert!(
+        got[0]["dx_mm"].is_null() && got[0]["ripple"].is_null(),
+        "{}",
+        got[0]
+    );
+    assert!(
+        got[0]["ripple_reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("pixel size is unknown")),
+        "{}",
+        got[0]
+    );
 }

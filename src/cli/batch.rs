@@ -10,7 +10,9 @@
 //! - Output order is the input order whatever the parallelism; maps run in parallel (rayon,
 //!   `--jobs` threads), with a progress bar on stderr when stderr is a terminal.
 //! - A map that fails gives a line `{"file": ..., "error": ..., "exit_code": ...}`; the command
-//!   exits 1 at the end if any map failed.
+//!   exits non-zero at the end if any map failed: with the failures' exit code when they all
+//!   share one (2 when every failure is bad input, so a batch of one map exits as `stats` would),
+//!   else 1.
 
 use std::path::{Path, PathBuf};
 
@@ -159,17 +161,25 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     };
     bar.finish_and_clear();
     let mut failed = 0;
+    let mut codes: Vec<i64> = Vec::new();
     let mut text = String::new();
     for v in &lines {
         if v.get("error").is_some() {
             failed += 1;
+            codes.push(v.get("exit_code").and_then(Value::as_i64).unwrap_or(1));
         }
         text.push_str(&format!("{v}\n"));
     }
     super::write_stdout(text.as_bytes())?;
     if failed > 0 {
+        codes.sort_unstable();
+        codes.dedup();
+        let code = match codes[..] {
+            [2] => 2,
+            _ => 1,
+        };
         return Err(CliError {
-            code: 1,
+            code,
             message: format!(
                 "{failed} of {} maps failed (their JSON lines carry the error)",
                 lines.len()

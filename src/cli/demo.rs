@@ -140,6 +140,13 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     let samples = match &args.generate_samples {
         Some(dir) => dir,
         None if args.samples.is_dir() => &args.samples,
+        None if args.samples.exists() => {
+            return Err(CliError::input(
+                &args.samples,
+                "--samples: not a directory (the folder of sample runs, samples/original and \
+                 samples/suppression)",
+            ));
+        }
         None => {
             stage!(
                 "bonnetlab demo: no {} folder here; generating the samples into {}",

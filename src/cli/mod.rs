@@ -292,13 +292,21 @@ pub fn usage_error(e: &clap::Error) -> i32 {
             }
         }
         _ => {
+            // The message is its first paragraph, on one line: clap lists the missing
+            // arguments on the lines below "the following required arguments were not provided:".
             let text = e.render().to_string();
-            let first = text
+            let para: Vec<&str> = text
                 .lines()
                 .map(str::trim)
-                .find(|l| !l.is_empty())
-                .unwrap_or("invalid arguments");
-            let first = first.strip_prefix("error: ").unwrap_or(first);
+                .skip_while(|l| l.is_empty())
+                .take_while(|l| !l.is_empty() && !l.starts_with("Usage:"))
+                .collect();
+            let first = if para.is_empty() {
+                "invalid arguments".to_string()
+            } else {
+                para.join(" ")
+            };
+            let first = first.strip_prefix("error: ").unwrap_or(&first);
             eprintln!("bonnetlab: {first} (see bonnetlab --help)");
             2
         }

@@ -40,6 +40,13 @@ pub fn sweep(
             code: err.exit_code(),
             message: format!("{err} (listed at {} line {})", manifest.display(), e.line),
         })?;
+        // A map without its pixel size is bad input (exit 2), as in every other command.
+        s.pixel_mm("spot analysis").map_err(|err| {
+            Error::input(
+                &e.path,
+                format!("{err} (listed at {} line {})", manifest.display(), e.line),
+            )
+        })?;
         maps.push(s);
         progress.inc();
     }

@@ -167,6 +167,18 @@ pub fn batch_value(
     }
     let report = stats_report(file, &s, terms, false)?;
     let mut v = serde_json::to_value(&report).map_err(|e| Error::processing(file, e))?;
+    if pitch_mm.is_some() && (s.dx_mm.is_none() || s.dy_mm.is_none()) {
+        // No pixel size, no spatial frequency: the statistics stand, the ripple is absent
+        // with its reason (as for a pitch the map cannot resolve).
+        if let Value::Object(m) = &mut v {
+            m.insert("window".into(), json!(window.name()));
+            m.insert(
+                "ripple_reason".into(),
+                json!("not resolvable: the pixel size is unknown (the file carries 0); give --pixel-mm"),
+            );
+        }
+        return Ok(v);
+    }
     if let Some(p) = pitch_mm {
         let opts = PsdOptions {
             window,
