@@ -271,3 +271,40 @@ fn batch_on_a_micron_map_with_a_3_mm_pitch() {
     let sigma1 = b["ripple"]["sigma1_nm"].as_f64().unwrap();
     assert!((sigma1 / (4.0 / 2f64.sqrt()) - 1.0).abs() < 0.1, "{b}");
 }
+
+/// A reference run without removal (its before map given as its after map): the improvement
+/// over it is undefined, absent with a reason rather than a bare null (it was NaN, printed as
+/// null). The other run's own figures stand.
+#[test]
+fn compare_against_a_reference_without_removal_says_why_there_is_no_improvement() {
+    let dir = tempfile::tempdir().unwrap();
+    let a = micron_map(dir.path(), "a.dat", 1);
+    let b = micron_map(dir.path(), "b.dat", 2);
+    let out = dir.path().join("o");
+    let o = bonnetlab(&[
+        "compare",
+        "--run",
+        &format!("z={},{}", a.display(), a.display()),
+        "--run",
+        &format!("b={},{}", a.display(), b.display()),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let b = &v["runs"][1];
+    assert_eq!(
+        v["runs"][0]["cr_rms"].as_f64(),
+        Some(0.0),
+        "{}",
+        v["runs"][0]
+    );
+    assert!(b["cr_rms"].as_f64().is_some_and(f64::is_finite), "{b}");
+    assert!(
+        b.get("improvement_cr_rms").is_none() && b.get("improvement").is_none(),
+        "{b}"
+    );
+    let why = b["improvement_reason"].as_str().expect("a reason");
+    assert!(why.contains("'z'") && why.contains("undefined"), "{why}");
+}

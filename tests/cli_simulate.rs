@@ -70,6 +70,29 @@ fn simulate_writes_maps_json_and_plots() {
     let removal = bonnetlab::io::read_surface(&out.join("predicted_removal.dat")).unwrap();
     let mean = removal.valid_heights().sum::<f64>() / removal.valid_count() as f64;
     assert!((mean / expect - 1.0).abs() < 0.01, "{mean} vs {expect}");
+    assert!(v.get("ripple_reason").is_none(), "{}", v["ripple_reason"]);
+    // Without a pitch in the recipe the ripple is null with its reason beside it.
+    let nopitch = std::fs::read_to_string(d.join("recipe.toml"))
+        .unwrap()
+        .replacen("pitch_mm = 2.0\n", "", 1);
+    std::fs::write(d.join("nopitch.toml"), nopitch).unwrap();
+    let o = simulate(
+        &d.join("nopitch.toml"),
+        &d.join("nopitch"),
+        &["--no-vibration"],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let w: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("nopitch").join("simulation.json")).unwrap())
+            .unwrap();
+    assert!(w["ripple"].is_null(), "{}", w["ripple"]);
+    assert!(
+        w["ripple_reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("pitch_mm")),
+        "{}",
+        w["ripple_reason"]
+    );
     // A recipe whose pixels are area means: the prediction is each pixel's mean of the
     // removal. The TIF is 100x faster here so that the box's effect (0.19 nm RMS) stands far
     // above the .dat files' height step (about 0.01 nm). Measured: the area prediction is

@@ -128,6 +128,8 @@ impl RunInput {
             )
         })?;
         let after = read(&after_path)?;
+        bonnetlab_process::recipe::check_measured_removal(&before, &after)
+            .map_err(|e| BonnetsError::input(&after_path, e))?;
         let spot = match &recipe.tif {
             TifSource::Spot { path, .. } => Some(read(path)?),
             _ => None,

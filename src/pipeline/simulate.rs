@@ -101,6 +101,9 @@ pub struct SimulationReport {
     pub pitch_mm: Option<f64>,
     /// Ripple of the predicted after map along Y at the pitch (null without a pitch).
     pub ripple: Option<Ripple>,
+    /// Why `ripple` is null (no pitch in the recipe); absent when there is a ripple.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ripple_reason: Option<String>,
     pub msf_band_per_mm: (f64, f64),
     pub mechanisms: Vec<Mechanism>,
     /// What each mechanism's `share` is a fraction of.
@@ -320,8 +323,12 @@ pub fn simulate(
             (mech, Some(summary))
         }
     };
-    if recipe.pitch_mm.is_none() {
-        notes.push("no [path] pitch_mm: ripple not evaluated".into());
+    let ripple_reason = recipe
+        .pitch_mm
+        .is_none()
+        .then(|| "no [path] pitch_mm in the recipe: ripple not evaluated".to_string());
+    if let Some(why) = &ripple_reason {
+        notes.push(why.clone());
     }
     let t = tool.sampled();
     let report = SimulationReport {
@@ -356,6 +363,7 @@ pub fn simulate(
         tif_volume_rate_nm_mm2_per_s: t.volume_rate_nm_mm2_per_s(),
         pitch_mm: recipe.pitch_mm,
         ripple,
+        ripple_reason,
         msf_band_per_mm: (f1, f2),
         mechanisms: mech,
         mechanism_share_basis: SHARE_BASIS.to_string(),

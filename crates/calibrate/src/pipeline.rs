@@ -127,6 +127,8 @@ pub fn load_recipe(recipe_path: &Path) -> Result<Problem, PipelineError> {
         tool.field().half_extent_mm(),
     )
     .map_err(|e| PipelineError::input(&recipe.path_log, e))?;
+    bonnetlab_process::recipe::check_measured_removal(&before, &after)
+        .map_err(|e| PipelineError::input(&after_path, e))?;
     let mut p = Problem::new(&before, &after, &TifMap::new(tool), &path).map_err(|e| match e {
         CalibrateError::Processing(m) => PipelineError {
             file: recipe_path.to_path_buf(),

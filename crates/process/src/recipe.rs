@@ -238,6 +238,32 @@ impl Ctx<'_> {
     }
 }
 
+/// Checks that a run's two maps record a removal: maps whose valid pixels coincide and hold
+/// the same heights (the same file named twice, or one measurement saved twice) leave nothing to
+/// compare or calibrate, and every model fitted to them would report a zero rate as a result.
+/// The error is the sentence to report against the after map (bad input).
+pub fn check_measured_removal(
+    before: &bonnetlab_surface::Surface,
+    after: &bonnetlab_surface::Surface,
+) -> Result<(), &'static str> {
+    let same = before.dim() == after.dim()
+        && before.valid() == after.valid()
+        && before
+            .heights_nm()
+            .iter()
+            .zip(after.heights_nm())
+            .zip(before.valid())
+            .all(|((a, b), &v)| !v || a == b);
+    if same {
+        Err(
+            "the after map holds the same heights as the before map on every valid pixel: \
+             there is no measured removal (the same measurement named twice?)",
+        )
+    } else {
+        Ok(())
+    }
+}
+
 impl Recipe {
     /// Reads and validates a recipe file.
     pub fn load(path: &Path) -> Result<Recipe, ProcessError> {

@@ -519,6 +519,7 @@ fn analyse_run(
         improvement_cr_rms: None,
         improvement_cr_pv: None,
         improvement: None,
+        improvement_reason: None,
         psd,
         maps: maps_for_pictures,
     })
@@ -593,6 +594,14 @@ fn add_improvements(runs: &mut [RunResult]) -> Result<(), CompareError> {
         return Ok(());
     };
     for r in rest {
+        if first.cr_rms == 0.0 || first.cr_pv == 0.0 {
+            r.improvement_reason = Some(format!(
+                "the reference run '{}' has a convergence ratio of 0 (RMS {}, PV {}): an \
+                 improvement relative to it is undefined",
+                first.name, first.cr_rms, first.cr_pv
+            ));
+            continue;
+        }
         let i_rms = (r.cr_rms - first.cr_rms) / first.cr_rms;
         let i_pv = (r.cr_pv - first.cr_pv) / first.cr_pv;
         let noise = match (&first.spread, &r.spread) {

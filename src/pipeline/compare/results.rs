@@ -148,6 +148,10 @@ pub struct RunResult {
     pub improvement_cr_pv: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub improvement: Option<Improvement>,
+    /// Why there is no improvement over the reference run (its convergence ratio is 0, so
+    /// a change relative to it is undefined); absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub improvement_reason: Option<String>,
     /// Averaged one-sided PSDs (not serialised: written as CSV).
     #[serde(skip)]
     pub psd: RunPsds,
