@@ -129,7 +129,7 @@ pub fn read_path_from(r: impl std::io::Read, name: &Path) -> Result<PathLog, Pro
     if p.len() < 2 {
         return Err(err(1, "a path log needs at least two samples".into()));
     }
-    check_rate(&p.t_s).map_err(|(k, what)| err(lines[k], what))?;
+    check_rate(&p).map_err(|(k, what)| err(lines[k], what))?;
     Ok(p)
 }
 
@@ -138,31 +138,52 @@ pub fn read_path_from(r: impl std::io::Read, name: &Path) -> Result<PathLog, Pro
 /// the sample run moves 10 mm between samples and its simulation is meaningless.
 pub const MIN_RATE_HZ: f64 = 5.0;
 
-/// Checks the log's sampling rate: the median interval between samples must be at most
-/// 1 / [`MIN_RATE_HZ`] (a few longer intervals, a pause or a lift, are allowed). On failure, the
-/// index of the first sample that ends a longer interval and what is wrong.
-fn check_rate(t_s: &[f64]) -> Result<(), (usize, String)> {
-    let mut dt: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
-    let Some(&first_long) = dt.iter().find(|&&d| d > 1.0 / MIN_RATE_HZ * (1.0 + 1e-9)) else {
+/// A log slower than [`MIN_RATE_HZ`] is still read when its samples are at most this far apart
+/// (median, mm): the path between them is then known to a fraction of any spot and pitch (a
+/// slow feed logged every 0.1 mm, at 4 Hz, is as good as a fast log).
+pub const MAX_SLOW_STEP_MM: f64 = 0.5;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        0.0
+    } else if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// Checks the log's sampling: the median interval between samples must be at most
+/// 1 / [`MIN_RATE_HZ`] (a few longer intervals, a pause or a lift, are allowed), or the median
+/// distance between samples at most [`MAX_SLOW_STEP_MM`]. On failure, the index of the first
+/// sample that ends a longer interval and what is wrong.
+fn check_rate(p: &PathLog) -> Result<(), (usize, String)> {
+    let slow = 1.0 / MIN_RATE_HZ * (1.0 + 1e-9);
+    let dt: Vec<f64> = p.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    let Some(k) = dt.iter().position(|&d| d > slow) else {
         return Ok(());
     };
-    let k = dt.iter().position(|&d| d == first_long).unwrap_or(0) + 1;
-    dt.sort_by(f64::total_cmp);
-    let median = if dt.len() % 2 == 1 {
-        dt[dt.len() / 2]
-    } else {
-        0.5 * (dt[dt.len() / 2 - 1] + dt[dt.len() / 2])
-    };
-    if median <= 1.0 / MIN_RATE_HZ * (1.0 + 1e-9) {
+    let median_dt = median(dt.clone());
+    if median_dt <= slow {
+        return Ok(());
+    }
+    let steps: Vec<f64> = (1..p.len())
+        .map(|i| (p.x_mm[i] - p.x_mm[i - 1]).hypot(p.y_mm[i] - p.y_mm[i - 1]))
+        .collect();
+    let median_step = median(steps);
+    if median_step <= MAX_SLOW_STEP_MM {
         return Ok(());
     }
     Err((
-        k,
+        k + 1,
         format!(
-            "the log is sampled at {:.3} Hz (median interval {median} s; this sample comes \
-             {first_long} s after the one before): a path log must be sampled at {MIN_RATE_HZ} Hz \
-             or more",
-            1.0 / median
+            "the log is sampled at {:.3} Hz with samples {median_step:.3} mm apart (medians; \
+             this sample comes {:.3} s after the one before): a path log must be sampled at \
+             {MIN_RATE_HZ} Hz or more, or at most {MAX_SLOW_STEP_MM} mm apart",
+            1.0 / median_dt,
+            dt[k]
         ),
     ))
 }
@@ -250,10 +271,16 @@ mod tests {
     fn a_log_slower_than_5_hz_is_refused() {
         let slow = "t_s,x_mm,y_mm\n0,0,0\n0.1,1,0\n1.1,2,0\n2.1,3,0\n3.1,4,0\n";
         let e = read(slow).unwrap_err().to_string();
-        assert!(e.contains("line 4") && e.contains("1.000 Hz"), "{e}");
+        assert!(
+            e.contains("line 4") && e.contains("1.000 Hz") && e.contains("1.000 mm apart"),
+            "{e}"
+        );
         assert!(read("t_s,x_mm,y_mm\n0,0,0\n0.2,1,0\n0.4,2,0\n0.6,3,0\n").is_ok());
         let pause = "t_s,x_mm,y_mm\n0,0,0\n0.1,1,0\n5.1,1,0\n5.2,2,0\n";
         assert!(read(pause).is_ok());
+        // A slow feed logged densely along the path: 4 Hz, 0.1 mm apart.
+        let dense = "t_s,x_mm,y_mm\n0,0,0\n0.25,0.1,0\n0.5,0.2,0\n0.75,0.3,0\n";
+        assert!(read(dense).is_ok());
     }
 
     #[test]
