@@ -429,3 +429,36 @@ fn minus_gives_the_repeatability_of_two_measurements() {
         "{err}"
     );
 }
+
+/// A map minus itself is flat: RMS 0 and skewness / kurtosis null with the reason beside them
+/// (they were printed as 0.0, and Sv as -0.0). A real map's parameters stay numbers.
+#[test]
+#[cfg_attr(
+    no_shared_data,
+    ignore = "needs shared/data: set BONNETLAB_SHARED_DATA (README, Tests)"
+)]
+fn a_flat_difference_has_undefined_moments_with_a_reason() {
+    let p = real("pyxsurf_01_801B.dat");
+    let ps = p.to_str().unwrap();
+    let out = stats(&[ps, "--minus", ps, "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["rms_nm"].as_f64(), Some(0.0), "{v}");
+    assert!(v["ssk"].is_null() && v["sku"].is_null(), "{v}");
+    assert!(
+        v["moments_reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("flat")),
+        "{v}"
+    );
+    assert_eq!(serde_json::to_string(&v["sv_nm"]).unwrap(), "0.0");
+    let real_map = json(&p, "piston");
+    assert!(real_map["ssk"].is_number() && real_map.get("moments_reason").is_none());
+    // The table says so too.
+    let out = stats(&[ps, "--minus", ps]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("undefined (a flat map"));
+}

@@ -68,7 +68,8 @@ pub struct Args {
     #[arg(long, default_value_t = 5, value_parser = super::num::pixels)]
     pub max_gap_px: usize,
     /// Shortest line segment analysed, pixels. Every segment at least this long is used, each
-    /// from its own first unbiased bin (ceil(b N / m) for a segment of m of N samples) up.
+    /// from its own first unbiased bin (ceil(b N / m) for a segment of m of N samples) up. A
+    /// value longer than the lines means whole lines only (it is taken as the line's length).
     #[arg(long, default_value_t = 8)]
     pub min_segment_px: usize,
     /// Also skip segments shorter than this fraction of the line (0 = use every segment; 0.5

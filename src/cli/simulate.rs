@@ -49,6 +49,8 @@ pub struct Args {
     #[arg(long, value_enum)]
     pub bonnet: Option<BonnetArg>,
     /// Exact time-domain deposition instead of the fast FFT method (the reference; slower).
+    /// The nominal removal only: give it with --no-vibration (the vibration coupling has the
+    /// fast method only).
     #[arg(long)]
     pub exact: bool,
     /// Leave the vibration coupling out (nominal removal only).

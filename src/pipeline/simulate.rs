@@ -218,6 +218,12 @@ pub fn simulate(
     };
     let with_vibration = !opts.no_vibration
         && (opts.bonnet.is_some() || recipe.vibration.is_some() || has_process_table(recipe_file));
+    if exact && with_vibration {
+        return Err(Error::usage(
+            "--exact applies to the nominal removal only (the vibration coupling has the fast \
+             method): add --no-vibration",
+        ));
+    }
     let mut notes = Vec::new();
     let (prediction, vib, sweep) = if with_vibration || opts.sweep_rpm {
         let p = &recipe.process;
@@ -252,12 +258,6 @@ pub fn simulate(
                 .map_err(|e| vibration_error(recipe_file, recipe.vibration.as_ref(), e))?;
             let prediction = prediction_from(&before, pred.removal_nm())
                 .map_err(|e| Error::processing(&recipe.before, e))?;
-            if exact {
-                notes.push(
-                    "vibration coupling uses the fast method; --exact applies only without it"
-                        .to_string(),
-                );
-            }
             (prediction, Some(pred), sweep)
         } else {
             (nominal(&before, &tool, &path, exact, &recipe)?, None, sweep)

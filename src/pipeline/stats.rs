@@ -31,6 +31,9 @@ pub struct StatsReport {
     /// parameters as the surface crate computes and names them.
     #[serde(flatten)]
     pub heights: HeightStats,
+    /// Why `ssk` and `sku` are null (a flat map); absent when they are numbers.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub moments_reason: Option<&'static str>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pvr_nm: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -143,6 +146,10 @@ pub fn stats_report_with_bands(
         valid: st.valid,
         removed: r.removed.clone(),
         heights: st,
+        moments_reason: st
+            .ssk
+            .is_none()
+            .then_some("the map is flat after the removed terms (RMS 0): skewness and kurtosis are 0 / 0, undefined"),
         pvr_nm: p.map(|p| p.pvr_nm),
         pvr_set: p.map(|_| PVR_SET),
         bands,

@@ -40,8 +40,13 @@ pub fn table(r: &StatsReport) -> String {
     t += &format!("Sa        {:>12.4} nm\n", r.heights.sa_nm);
     t += &format!("Sp        {:>12.4} nm\n", r.heights.sp_nm);
     t += &format!("Sv        {:>12.4} nm\n", r.heights.sv_nm);
-    t += &format!("Ssk       {:>12.4}\n", r.heights.ssk);
-    t += &format!("Sku       {:>12.4}   (not minus 3)\n", r.heights.sku);
+    match (r.heights.ssk, r.heights.sku) {
+        (Some(ssk), Some(sku)) => {
+            t += &format!("Ssk       {ssk:>12.4}\n");
+            t += &format!("Sku       {sku:>12.4}   (not minus 3)\n");
+        }
+        _ => t += "Ssk, Sku  undefined (a flat map: RMS 0)\n",
+    }
     if let (Some(p), Some(set)) = (r.pvr_nm, r.pvr_set) {
         t += &format!("PVr       {p:>12.4} nm   ({set})\n");
     }

@@ -138,6 +138,20 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SpotsError> {
             what: "lists no spot".into(),
         });
     }
+    // One measured spot is one polishing setting: the same map listed twice (with other
+    // settings) would enter the sweep twice as two different spots.
+    for (k, e) in m.spots.iter().enumerate() {
+        if let Some(first) = m.spots[..k].iter().find(|f| f.path == e.path) {
+            return Err(SpotsError::Manifest {
+                at: format!("line {}", e.line),
+                what: format!(
+                    "{} is listed again (first at line {}): each spot map is one setting",
+                    e.path.display(),
+                    first.line
+                ),
+            });
+        }
+    }
     Ok(m)
 }
 
@@ -447,6 +461,21 @@ sweep = "offset_mm"
             .to_string();
         assert!(e.contains("[spot] offset_mm: expected a number"), "{e}");
         assert!(!e.contains('\n'));
+    }
+
+    /// The same map listed twice is named at its second line.
+    #[test]
+    fn a_map_listed_twice_is_refused() {
+        let text = "file,bonnet,dwell_s,precession_deg,offset_mm,spindle_rpm,inner_pressure_mpa\n\
+                    a.dat,original,120,20,0.2,500,0.25\n\
+                    a.dat,original,120,20,0.4,500,0.25\n";
+        let e = parse_manifest(Path::new("m.csv"), text)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 3") && e.contains("a.dat is listed again (first at line 2)"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -105,10 +105,18 @@ impl Term {
         })
     }
 
-    /// Parses a comma list such as `piston,tilt`; an empty string or `none` gives no term.
+    /// Parses a comma list such as `piston,tilt`; `none` gives no term, an empty term is an error.
     pub fn parse_list(s: &str) -> Result<Vec<Term>, SurfaceError> {
         let mut out = Vec::new();
-        for tok in s.split(',').map(str::trim).filter(|t| !t.is_empty()) {
+        // An empty term ("piston,,tilt", a trailing comma, or nothing at all) is refused: it is
+        // a typo more often than a wish, and "none" says "no terms" explicitly.
+        for tok in s.split(',').map(str::trim) {
+            if tok.is_empty() {
+                return Err(SurfaceError::InvalidArgument(format!(
+                    "'{s}' has an empty term (a comma list of piston, tilt, power, zernikeN, \
+                     legendreD, or none)"
+                )));
+            }
             if tok.eq_ignore_ascii_case("none") {
                 continue;
             }
@@ -557,6 +565,9 @@ mod tests {
             "legendre13",
             "legendre-1",
             "zernikeX",
+            "",
+            "piston,,tilt",
+            "piston,",
         ] {
             assert!(Term::parse_list(bad).is_err(), "{bad}");
         }

@@ -24,8 +24,9 @@ pub struct HeightStats {
     pub sp_nm: f64,
     pub sv_nm: f64,
     pub sz_nm: f64,
-    pub ssk: f64,
-    pub sku: f64,
+    /// Skewness and kurtosis: `None` for a flat map (RMS 0), where they are 0 / 0.
+    pub ssk: Option<f64>,
+    pub sku: Option<f64>,
 }
 
 /// Computes the height parameters of the valid pixels (after whatever form was removed).
@@ -52,9 +53,9 @@ pub fn height_stats(s: &Surface) -> Result<HeightStats, SurfaceError> {
     let var = m2 / nf;
     let rms = var.sqrt();
     let (ssk, sku) = if var > 0.0 {
-        (m3 / nf / (var * rms), m4 / nf / (var * var))
+        (Some(m3 / nf / (var * rms)), Some(m4 / nf / (var * var)))
     } else {
-        (0.0, 0.0)
+        (None, None)
     };
     Ok(HeightStats {
         valid: n,
@@ -63,7 +64,8 @@ pub fn height_stats(s: &Surface) -> Result<HeightStats, SurfaceError> {
         rms_nm: rms,
         sa_nm: sa / nf,
         sp_nm: hi,
-        sv_nm: -lo,
+        // + 0.0: a flat map's valley is 0, not -0.
+        sv_nm: -lo + 0.0,
         sz_nm: hi - lo,
         ssk,
         sku,
@@ -73,6 +75,15 @@ pub fn height_stats(s: &Surface) -> Result<HeightStats, SurfaceError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A flat map: RMS 0, skewness and kurtosis undefined (None, not 0), no -0 valley.
+    #[test]
+    fn a_flat_map_has_no_shape_moments() {
+        let s = Surface::new(Array2::from_elem((4, 5), 7.0), Some(1.0), Some(1.0)).unwrap();
+        let st = height_stats(&s).unwrap();
+        assert_eq!((st.rms_nm, st.ssk, st.sku), (0.0, None, None));
+        assert!(st.sv_nm == 0.0 && st.sv_nm.is_sign_positive());
+    }
     use ndarray::Array2;
     use std::f64::consts::PI;
 
@@ -86,8 +97,8 @@ mod tests {
         let s = Surface::new(z, Some(0.1), Some(0.1)).unwrap();
         let st = height_stats(&s).unwrap();
         assert!((st.rms_nm - a / 2f64.sqrt()).abs() < 1e-9);
-        assert!(st.ssk.abs() < 1e-9);
-        assert!((st.sku - 1.5).abs() < 1e-9);
+        assert!(st.ssk.unwrap().abs() < 1e-9);
+        assert!((st.sku.unwrap() - 1.5).abs() < 1e-9);
         // Sa and PV of the sampled sine, by brute force over one period of 30 samples.
         let samples: Vec<f64> = (0..30)
             .map(|j| a * (2.0 * PI * j as f64 / 30.0).sin())

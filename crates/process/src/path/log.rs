@@ -61,6 +61,19 @@ pub fn read_path_from(r: impl std::io::Read, name: &Path) -> Result<PathLog, Pro
         .map_err(|e| err(1, format!("cannot read the header: {e}")))?
         .clone();
     let col = |want: &str| headers.iter().position(|h| h.eq_ignore_ascii_case(want));
+    for want in ["t_s", "x_mm", "y_mm"] {
+        if headers
+            .iter()
+            .filter(|h| h.eq_ignore_ascii_case(want))
+            .count()
+            > 1
+        {
+            return Err(err(
+                1,
+                format!("the header names {want} more than once: which column is meant?"),
+            ));
+        }
+    }
     let (it, ix, iy) = match (col("t_s"), col("x_mm"), col("y_mm")) {
         (Some(a), Some(b), Some(c)) => (a, b, c),
         _ => {
@@ -278,6 +291,10 @@ mod tests {
         assert!(read("t_s,x_mm,y_mm\n0,0,0\n0.2,1,0\n0.4,2,0\n0.6,3,0\n").is_ok());
         let pause = "t_s,x_mm,y_mm\n0,0,0\n0.1,1,0\n5.1,1,0\n5.2,2,0\n";
         assert!(read(pause).is_ok());
+        let twice = read("t_s,x_mm,y_mm,X_MM\n0,0,0,1\n0.1,1,0,2\n").unwrap_err();
+        assert!(twice
+            .to_string()
+            .contains("line 1: the header names x_mm more than once"));
         // A slow feed logged densely along the path: 4 Hz, 0.1 mm apart.
         let dense = "t_s,x_mm,y_mm\n0,0,0\n0.25,0.1,0\n0.5,0.2,0\n0.75,0.3,0\n";
         assert!(read(dense).is_ok());
