@@ -677,3 +677,38 @@ fn one_unwritable_output_publishes_none_of_the_others() {
     assert_eq!(listing(&out), vec!["keep.txt".to_string()]);
     assert_eq!(std::fs::read(out.join("keep.txt")).unwrap(), b"old");
 }
+
+/// `--json` may go inside the `--out` directory the command creates; two outputs naming one
+/// file are refused before anything is published (one silently replaced the other before).
+#[test]
+fn outputs_inside_the_out_directory_and_outputs_naming_one_file() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("vd");
+    let mut c = bin();
+    c.args(["vibration", "--out"]).arg(&out);
+    c.arg("--json").arg(out.join("summary.json"));
+    let o = run(c, Stdio::piped());
+    assert_eq!(o.status.code(), Some(0), "{}", err(&o));
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert!(v["natural_freq1_hz"].is_number(), "{v}");
+    assert!(out.join("timeseries.csv").is_file());
+
+    let twice = d.path().join("ve");
+    let mut c = bin();
+    c.args(["vibration", "--out"]).arg(&twice);
+    c.arg("--json").arg(twice.join("timeseries.csv"));
+    let o = run(c, Stdio::piped());
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    one_line(&o, "two outputs of this command name the same file");
+    assert!(!twice.exists(), "{:?}", listing(&twice));
+
+    let same = d.path().join("same.svg");
+    let mut c = bin();
+    c.arg("psd").arg(sample_map()).arg("--csv").arg(&same);
+    c.arg("--plot").arg(&same);
+    let o = run(c, Stdio::piped());
+    assert_eq!(o.status.code(), Some(2), "{}", err(&o));
+    one_line(&o, "same.svg: two outputs");
+    assert_eq!(listing(d.path()), vec!["vd".to_string()]);
+}

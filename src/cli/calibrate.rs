@@ -37,10 +37,8 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         .map_err(|e| CliError::processing(&args.recipe, e))?
         + "\n";
     // calibration.json, report.html and the --json file are published together or not at all.
+    // The set first: it creates the --out directory, where the --json file may be.
     let mut outputs = super::Outputs::default();
-    if let Some(out) = &args.json {
-        outputs.file(out, text.as_bytes())?;
-    }
     if let Some(dir) = &args.out {
         let werr = super::write_error;
         let html = report_html(&cal, &args.recipe).map_err(|e| CliError::processing(dir, e))?;
@@ -49,6 +47,9 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             .map_err(werr)?;
         set.bytes("report.html", html.as_bytes()).map_err(werr)?;
         outputs.set(set);
+    }
+    if let Some(out) = &args.json {
+        outputs.file(out, text.as_bytes())?;
     }
     outputs.publish()?;
     let json_on_stdout = match &args.json {

@@ -101,15 +101,16 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     bar.finish_and_clear();
     let solved = solved?;
     // The --out files and the --json file are published together or not at all.
+    // The set first: it creates the --out directory, where the --json file may be.
     let mut outputs = super::Outputs::default();
     let report = &solved.report;
+    if let Some(dir) = &args.out {
+        outputs.set(stage_outputs(dir, &solved)?);
+    }
     if let Some(p) = &args.json {
         let text = serde_json::to_string_pretty(report)
             .map_err(|e| CliError::processing(p, format!("JSON: {e}")))?;
         outputs.file(p, format!("{text}\n").as_bytes())?;
-    }
-    if let Some(dir) = &args.out {
-        outputs.set(stage_outputs(dir, &solved)?);
     }
     outputs.publish()?;
     match &args.json {

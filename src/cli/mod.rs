@@ -151,8 +151,10 @@ pub fn emit(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
 /// other output as it was. What goes to stdout (`-`) is printed after the files.
 #[derive(Default)]
 pub struct Outputs {
-    set: Option<crate::report::write::Set>,
+    // Declared (so dropped) before the set: a staged file inside the set's new directory is
+    // removed before the set removes that directory.
     files: Vec<(std::path::PathBuf, bonnetlab_io::atomic::Staged)>,
+    set: Option<crate::report::write::Set>,
     stdout: Vec<u8>,
 }
 
@@ -176,7 +178,27 @@ impl Outputs {
     }
 
     /// Publishes the set, then the files (one rename each), then prints what goes to stdout.
+    /// Two outputs that name one file (`--json` onto a file of the `--out` set, `--csv` and
+    /// `--plot` alike) are refused before anything is published: one would silently replace
+    /// the other.
     pub fn publish(self) -> Result<(), CliError> {
+        let mut seen: Vec<std::path::PathBuf> = Vec::new();
+        let set_dests = self.set.iter().flat_map(|s| s.destinations());
+        let file_dests = self.files.iter().map(|(_, f)| f.destination());
+        for (dest, named) in set_dests
+            .map(|d| (d, d))
+            .chain(file_dests.zip(self.files.iter().map(|(p, _)| p.as_path())))
+        {
+            let key = same_file_key(dest);
+            if seen.contains(&key) {
+                return Err(CliError::usage(format!(
+                    "{}: two outputs of this command name the same file (one would replace the \
+                     other); give them different names",
+                    named.display()
+                )));
+            }
+            seen.push(key);
+        }
         if let Some(set) = self.set {
             set.commit().map_err(write_error)?;
         }
@@ -187,6 +209,20 @@ impl Outputs {
             write_stdout(&self.stdout)?;
         }
         Ok(())
+    }
+}
+
+/// A file's identity for comparing output destinations: its directory resolved (it exists
+/// once something is staged there) and its name.
+fn same_file_key(p: &Path) -> std::path::PathBuf {
+    let dir = match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    let dir = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+    match p.file_name() {
+        Some(n) => dir.join(n),
+        None => dir,
     }
 }
 

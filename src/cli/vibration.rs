@@ -47,18 +47,10 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     let recipe = args.recipe.as_deref().zip(text.as_deref());
     let v = response(recipe, args.bonnet.as_deref(), args.duration_s)?;
 
-    // Everything is computed first; the --out files (one set, `report::write::Set`) and the
-    // --json file are then published together or not at all, before the summary.
+    // Everything is computed first; the --out files (one set, `report::write::Set`, staged
+    // first: it creates the directory, where the --json file may be) and the --json file are
+    // then published together or not at all, before the summary.
     let mut published = super::Outputs::default();
-    if let Some(json_path) = &args.json {
-        let text = if v.outs.len() == 1 {
-            serde_json::to_string_pretty(&v.outs[0])
-        } else {
-            serde_json::to_string_pretty(&v.outs)
-        }
-        .map_err(|e| CliError::processing(json_path, e))?;
-        published.file(json_path, format!("{text}\n").as_bytes())?;
-    }
     if let Some(dir) = &args.out {
         let outputs = v.outputs(args.duration_s, args.seed, &dir.join("timeseries.csv"))?;
         let werr = super::write_error;
@@ -79,6 +71,15 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         let csv = report::vibration::timeseries_csv(&outputs.timeseries);
         set.bytes("timeseries.csv", &csv).map_err(werr)?;
         published.set(set);
+    }
+    if let Some(json_path) = &args.json {
+        let text = if v.outs.len() == 1 {
+            serde_json::to_string_pretty(&v.outs[0])
+        } else {
+            serde_json::to_string_pretty(&v.outs)
+        }
+        .map_err(|e| CliError::processing(json_path, e))?;
+        published.file(json_path, format!("{text}\n").as_bytes())?;
     }
     published.publish()?;
 

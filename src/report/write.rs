@@ -110,6 +110,11 @@ impl Set {
         self.bytes(name, &data)
     }
 
+    /// Where the staged files will be published.
+    pub fn destinations(&self) -> impl Iterator<Item = &Path> {
+        self.inner.destinations()
+    }
+
     /// Publishes every staged file.
     pub fn commit(self) -> Result<(), WriteError> {
         let dir = self.inner.dir().to_path_buf();

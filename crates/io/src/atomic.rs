@@ -133,6 +133,11 @@ pub fn stage(path: &Path, bytes: &[u8]) -> io::Result<Staged> {
 }
 
 impl Staged {
+    /// Where the content will be published.
+    pub fn destination(&self) -> &Path {
+        &self.dest
+    }
+
     /// Publishes the staged content over the destination (one rename).
     pub fn commit(mut self) -> io::Result<()> {
         fs::rename(&self.tmp, &self.dest)?;
@@ -357,6 +362,11 @@ impl OutputSet {
     /// The directory the set is published into.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+
+    /// Where the staged files will be published, in the order written.
+    pub fn destinations(&self) -> impl Iterator<Item = &Path> {
+        self.files.iter().map(|(_, d)| d.as_path())
     }
 
     /// Checks `name` (a relative path without `..`) and its final destination.
