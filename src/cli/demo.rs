@@ -119,8 +119,38 @@ fn generate_samples(dir: &Path, seed: u64, repeats: usize) -> Result<(), CliErro
     Ok(())
 }
 
+/// Checks, before any work, that `dir` can be an output directory: absent (its nearest
+/// existing ancestor a directory) or a directory. The demo writes several sets one after
+/// another (samples, the maps' report, the bonnets' report); a destination that cannot take
+/// them is refused before the first is published.
+fn usable_dir(dir: &Path) -> Result<(), CliError> {
+    let not_dir = |p: &Path| {
+        CliError::input(
+            dir,
+            format!("cannot write: {} is not a directory", p.display()),
+        )
+    };
+    for a in dir.ancestors() {
+        if a.as_os_str().is_empty() {
+            break;
+        }
+        if let Ok(m) = std::fs::metadata(a) {
+            return if m.is_dir() { Ok(()) } else { Err(not_dir(a)) };
+        }
+    }
+    Ok(())
+}
+
 pub fn run(args: &Args) -> Result<(), CliError> {
+    if let Some(o) = &args.out {
+        usable_dir(o)?;
+        usable_dir(&o.join("bonnets"))?;
+    } else if args.generate_samples.is_none() {
+        usable_dir(Path::new("reports/demo"))?;
+        usable_dir(Path::new("reports/demo/bonnets"))?;
+    }
     if let Some(dir) = &args.generate_samples {
+        usable_dir(dir)?;
         generate_samples(dir, args.seed, args.repeats)?;
     }
     let default_out = PathBuf::from("reports/demo");

@@ -41,12 +41,17 @@ pub fn sweep(
             message: format!("{err} (listed at {} line {})", manifest.display(), e.line),
         })?;
         // A map without its pixel size is bad input (exit 2), as in every other command.
-        s.pixel_mm("spot analysis").map_err(|err| {
-            Error::input(
+        if s.dx_mm.is_none() || s.dy_mm.is_none() {
+            return Err(Error::input(
                 &e.path,
-                format!("{err} (listed at {} line {})", manifest.display(), e.line),
-            )
-        })?;
+                format!(
+                    "the pixel size is unknown (the file carries 0): a spot map must carry its \
+                     pixel size (listed at {} line {})",
+                    manifest.display(),
+                    e.line
+                ),
+            ));
+        }
         maps.push(s);
         progress.inc();
     }

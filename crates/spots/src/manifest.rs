@@ -140,8 +140,12 @@ pub fn parse_manifest(path: &Path, text: &str) -> Result<Manifest, SpotsError> {
     }
     // One measured spot is one polishing setting: the same map listed twice (with other
     // settings) would enter the sweep twice as two different spots.
+    // The file itself, not its spelling (`a.dat`, `./a.dat` and a link to it are one map).
+    let mut seen: std::collections::HashMap<std::path::PathBuf, usize> =
+        std::collections::HashMap::with_capacity(m.spots.len());
     for (k, e) in m.spots.iter().enumerate() {
-        if let Some(first) = m.spots[..k].iter().find(|f| f.path == e.path) {
+        let id = std::fs::canonicalize(&e.path).unwrap_or_else(|_| e.path.clone());
+        if let Some(first) = seen.insert(id, k).map(|j| &m.spots[j]) {
             return Err(SpotsError::Manifest {
                 at: format!("line {}", e.line),
                 what: format!(
@@ -476,6 +480,21 @@ sweep = "offset_mm"
             e.contains("line 3") && e.contains("a.dat is listed again (first at line 2)"),
             "{e}"
         );
+    }
+
+    /// The same file spelt two ways (`a.dat`, `./a.dat`) is one map.
+    #[test]
+    fn one_file_spelt_two_ways_is_one_map() {
+        let dir = std::env::temp_dir().join(format!("bonnetlab-manifest-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("a.dat"), b"x").unwrap();
+        let text = "file,bonnet,dwell_s,precession_deg,offset_mm,spindle_rpm,inner_pressure_mpa\n\
+                    a.dat,original,120,20,0.2,500,0.25\n\
+                    ./a.dat,original,120,20,0.4,500,0.25\n";
+        let e = parse_manifest(&dir.join("m.csv"), text).map(|m| m.spots.len());
+        let _ = std::fs::remove_dir_all(&dir);
+        let e = e.unwrap_err().to_string();
+        assert!(e.contains("line 3") && e.contains("listed again"), "{e}");
     }
 
     #[test]

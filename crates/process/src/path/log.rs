@@ -151,52 +151,44 @@ pub fn read_path_from(r: impl std::io::Read, name: &Path) -> Result<PathLog, Pro
 /// the sample run moves 10 mm between samples and its simulation is meaningless.
 pub const MIN_RATE_HZ: f64 = 5.0;
 
-/// A log slower than [`MIN_RATE_HZ`] is still read when its samples are at most this far apart
-/// (median, mm): the path between them is then known to a fraction of any spot and pitch (a
-/// slow feed logged every 0.1 mm, at 4 Hz, is as good as a fast log).
+/// An interval longer than 1 / [`MIN_RATE_HZ`] is still read as known when the tool moves at
+/// most this far in it (mm): a slow feed logged every 0.1 mm, at 4 Hz, is as good as a fast log,
+/// and a pause at a point moves nothing.
 pub const MAX_SLOW_STEP_MM: f64 = 0.5;
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n == 0 {
-        0.0
-    } else if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
+/// The share of a log's intervals that may be both slower than 1 / [`MIN_RATE_HZ`] and longer
+/// than [`MAX_SLOW_STEP_MM`] (a lift, a move between segments); more, and part of the path is
+/// not known.
+pub const MAX_COARSE_SHARE: f64 = 0.1;
 
-/// Checks the log's sampling: the median interval between samples must be at most
-/// 1 / [`MIN_RATE_HZ`] (a few longer intervals, a pause or a lift, are allowed), or the median
-/// distance between samples at most [`MAX_SLOW_STEP_MM`]. On failure, the index of the first
-/// sample that ends a longer interval and what is wrong.
+/// Checks the log's sampling: at most [`MAX_COARSE_SHARE`] of its intervals may be both slower
+/// than 1 / [`MIN_RATE_HZ`] and longer than [`MAX_SLOW_STEP_MM`]. On failure, the index of the
+/// first sample that ends such an interval and what is wrong.
 fn check_rate(p: &PathLog) -> Result<(), (usize, String)> {
     let slow = 1.0 / MIN_RATE_HZ * (1.0 + 1e-9);
-    let dt: Vec<f64> = p.t_s.windows(2).map(|w| w[1] - w[0]).collect();
-    let Some(k) = dt.iter().position(|&d| d > slow) else {
-        return Ok(());
-    };
-    let median_dt = median(dt.clone());
-    if median_dt <= slow {
-        return Ok(());
-    }
-    let steps: Vec<f64> = (1..p.len())
-        .map(|i| (p.x_mm[i] - p.x_mm[i - 1]).hypot(p.y_mm[i] - p.y_mm[i - 1]))
+    let coarse: Vec<(usize, f64, f64)> = (1..p.len())
+        .map(|i| {
+            let dt = p.t_s[i] - p.t_s[i - 1];
+            let step = (p.x_mm[i] - p.x_mm[i - 1]).hypot(p.y_mm[i] - p.y_mm[i - 1]);
+            (i, dt, step)
+        })
+        .filter(|&(_, dt, step)| dt > slow && step > MAX_SLOW_STEP_MM)
         .collect();
-    let median_step = median(steps);
-    if median_step <= MAX_SLOW_STEP_MM {
+    let intervals = (p.len() - 1) as f64;
+    if (coarse.len() as f64) <= MAX_COARSE_SHARE * intervals {
         return Ok(());
     }
+    let (k, dt, step) = coarse[0];
     Err((
-        k + 1,
+        k,
         format!(
-            "the log is sampled at {:.3} Hz with samples {median_step:.3} mm apart (medians; \
-             this sample comes {:.3} s after the one before): a path log must be sampled at \
-             {MIN_RATE_HZ} Hz or more, or at most {MAX_SLOW_STEP_MM} mm apart",
-            1.0 / median_dt,
-            dt[k]
+            "{} of {} intervals are slower than {MIN_RATE_HZ} Hz and move more than \
+             {MAX_SLOW_STEP_MM} mm (this sample: {dt:.3} s and {step:.3} mm after the one \
+             before): the path between samples is not known; a path log must be sampled at \
+             {MIN_RATE_HZ} Hz or more (at most {:.0} % of its intervals slower and longer)",
+            coarse.len(),
+            p.len() - 1,
+            100.0 * MAX_COARSE_SHARE
         ),
     ))
 }
@@ -285,7 +277,7 @@ mod tests {
         let slow = "t_s,x_mm,y_mm\n0,0,0\n0.1,1,0\n1.1,2,0\n2.1,3,0\n3.1,4,0\n";
         let e = read(slow).unwrap_err().to_string();
         assert!(
-            e.contains("line 4") && e.contains("1.000 Hz") && e.contains("1.000 mm apart"),
+            e.contains("line 4") && e.contains("3 of 4 intervals"),
             "{e}"
         );
         assert!(read("t_s,x_mm,y_mm\n0,0,0\n0.2,1,0\n0.4,2,0\n0.6,3,0\n").is_ok());
@@ -295,6 +287,15 @@ mod tests {
         assert!(twice
             .to_string()
             .contains("line 1: the header names x_mm more than once"));
+        // A fast log whose last 40 % is thinned to 1 Hz, 2 mm apart: refused.
+        let mut mixed = String::from("t_s,x_mm,y_mm\n");
+        for k in 0..60 {
+            mixed += &format!("{},{},0\n", 0.02 * k as f64, 0.04 * k as f64);
+        }
+        for k in 0..40 {
+            mixed += &format!("{},{},0\n", 2.0 + k as f64, 3.0 + 2.0 * k as f64);
+        }
+        assert!(read(&mixed).is_err());
         // A slow feed logged densely along the path: 4 Hz, 0.1 mm apart.
         let dense = "t_s,x_mm,y_mm\n0,0,0\n0.25,0.1,0\n0.5,0.2,0\n0.75,0.3,0\n";
         assert!(read(dense).is_ok());
