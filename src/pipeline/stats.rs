@@ -181,7 +181,10 @@ pub fn batch_value(
             m.insert("window".into(), json!(window.name()));
             m.insert(
                 "ripple_reason".into(),
-                json!("not resolvable: the pixel size is unknown (the file carries 0); give --pixel-mm"),
+                json!(format!(
+                    "{}; give --pixel-mm",
+                    bonnetlab_spectrum::areal::UNKNOWN_PIXEL_REASON
+                )),
             );
         }
         return Ok(v);

@@ -48,6 +48,10 @@ use serde::Serialize;
 
 use crate::error::SpectrumError;
 
+/// Why a frequency-domain quantity of a map without a pixel size is absent (band RMS, ripple).
+pub const UNKNOWN_PIXEL_REASON: &str =
+    "not resolvable: the pixel size is unknown, so no spatial frequency can be assigned";
+
 /// Default band edges, mm^-1: figure above 33 mm periods, MSF 33 mm to 0.12 mm, fine below
 /// 0.12 mm. Source: shared/spec/metrology.md ("1/33 mm to 1/0.12 mm"), the large-optics
 /// (NIF / LLNL) convention for mid-spatial frequencies.
@@ -137,9 +141,7 @@ pub fn band_split(
         method: AREAL_METHOD.into(),
     };
     let (Some(dx), Some(dy)) = (s.dx_mm, s.dy_mm) else {
-        let why = "not resolvable: the pixel size is unknown, so no spatial frequency can be \
-                   assigned"
-            .to_string();
+        let why = UNKNOWN_PIXEL_REASON.to_string();
         out.figure_reason = Some(why.clone());
         out.msf_reason = Some(why.clone());
         out.fine_reason = Some(why);
