@@ -712,3 +712,50 @@ fn outputs_inside_the_out_directory_and_outputs_naming_one_file() {
     one_line(&o, "same.svg: two outputs");
     assert_eq!(listing(d.path()), vec!["vd".to_string()]);
 }
+
+/// A run into a directory a former run of the same command wrote removes the former run's
+/// files it does not write itself (here the PSD tables of a run no longer compared), but
+/// never a file the user put there or changed since.
+#[test]
+fn a_rerun_leaves_no_former_runs_file_beside_its_own() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().join("out");
+    let s = repo().join("samples/original");
+    let pair = format!(
+        "{},{}",
+        s.join("before_1.dat").display(),
+        s.join("after_1.dat").display()
+    );
+    let compare_runs = |names: &[&str]| {
+        let mut c = bin();
+        c.arg("compare");
+        for n in names {
+            c.arg("--run").arg(format!("{n}={pair}"));
+        }
+        let o = c.arg("--out").arg(&dir).output().unwrap();
+        assert!(o.status.success(), "{}", err(&o));
+    };
+    compare_runs(&["keep", "gone", "edited"]);
+    for axis in ["x", "y"] {
+        assert!(dir.join(format!("psd_{axis}_gone.csv")).exists());
+    }
+    std::fs::write(dir.join("notes.txt"), "the user's").unwrap();
+    std::fs::write(dir.join("psd_y_edited.csv"), "changed by the user").unwrap();
+    compare_runs(&["keep"]);
+    let names = listing(&dir);
+    for gone in ["psd_x_gone.csv", "psd_y_gone.csv", "psd_x_edited.csv"] {
+        assert!(!names.contains(&gone.to_string()), "{gone}: {names:?}");
+    }
+    for kept in [
+        "psd_x_keep.csv",
+        "psd_y_keep.csv",
+        "report.json",
+        "report.html",
+        "notes.txt",
+        "psd_y_edited.csv",
+    ] {
+        assert!(names.contains(&kept.to_string()), "{kept}: {names:?}");
+    }
+    let json = std::fs::read_to_string(dir.join("report.json")).unwrap();
+    assert!(!json.contains("\"gone\""), "the report is the second run's");
+}

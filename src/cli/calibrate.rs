@@ -42,7 +42,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     if let Some(dir) = &args.out {
         let werr = super::write_error;
         let html = report_html(&cal, &args.recipe).map_err(|e| CliError::processing(dir, e))?;
-        let mut set = crate::report::write::Set::begin(dir).map_err(werr)?;
+        let mut set = crate::report::write::Set::begin(dir, "calibrate").map_err(werr)?;
         set.bytes("calibration.json", text.as_bytes())
             .map_err(werr)?;
         set.bytes("report.html", html.as_bytes()).map_err(werr)?;

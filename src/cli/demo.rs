@@ -92,7 +92,7 @@ fn generate_samples(dir: &Path, seed: u64, repeats: usize) -> Result<(), CliErro
         code: 2,
         message: e.to_string(),
     };
-    let mut set = crate::report::write::Set::begin(dir).map_err(werr)?;
+    let mut set = crate::report::write::Set::begin(dir, "demo-samples").map_err(werr)?;
     let samples = generate(dir, seed, repeats, &Stages)?;
     for m in &samples.maps {
         let name = m.relative_path();

@@ -150,7 +150,7 @@ fn written(args: &Args) -> Vec<String> {
 fn stage_outputs(dir: &Path, solved: &SolvedCase) -> Result<report::write::Set, CliError> {
     let werr = super::write_error;
     let maps = solved.maps(dir)?;
-    let mut set = report::write::Set::begin(dir).map_err(werr)?;
+    let mut set = report::write::Set::begin(dir, "dwell").map_err(werr)?;
     let map = |set: &mut report::write::Set, name: &str, s: &Surface, f: MapFormat| {
         let bytes = bonnetlab_io::encode_surface(s, f)
             .map_err(|e| CliError::processing(dir.join(name), e))?;

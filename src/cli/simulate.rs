@@ -105,7 +105,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
 /// in `dir` changes unless every file is written; a second run into `dir` is refused).
 pub fn write_outputs(dir: &Path, sim: &Simulation) -> Result<(), CliError> {
     let werr = super::write_error;
-    let mut set = report::write::Set::begin(dir).map_err(werr)?;
+    let mut set = report::write::Set::begin(dir, "simulate").map_err(werr)?;
     set.surface(
         "predicted_after.dat",
         &sim.prediction.after,

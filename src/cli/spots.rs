@@ -127,7 +127,7 @@ fn write_outputs(
     analyses: &[SpotAnalysis],
 ) -> Result<(), String> {
     let w = |e: write::WriteError| e.to_string();
-    let mut set = write::Set::begin(dir).map_err(w)?;
+    let mut set = write::Set::begin(dir, "spots").map_err(w)?;
     set.json("report.json", &spots::json_out(manifest, rep))
         .map_err(w)?;
     set.bytes("spots.csv", &spots::spots_csv(rep)?).map_err(w)?;
@@ -157,7 +157,7 @@ fn make_sample(dir: &Path) -> Result<(), CliError> {
         code: 2,
         message: e.to_string(),
     };
-    let mut set = write::Set::begin(dir).map_err(w)?;
+    let mut set = write::Set::begin(dir, "spots-sample").map_err(w)?;
     for (file, s) in &maps {
         set.surface(file, s, MapFormat::MetroProDat).map_err(w)?;
     }

@@ -54,7 +54,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     if let Some(dir) = &args.out {
         let outputs = v.outputs(args.duration_s, args.seed, &dir.join("timeseries.csv"))?;
         let werr = super::write_error;
-        let mut set = report::write::Set::begin(dir).map_err(werr)?;
+        let mut set = report::write::Set::begin(dir, "vibration").map_err(werr)?;
         for dof in 0..2 {
             let plot = report::vibration::frf_plot(&v.params, &outputs.frf, dof);
             let stem = format!("frf_x{}", dof + 1);

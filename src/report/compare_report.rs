@@ -119,7 +119,7 @@ pub fn write_report_full(
 ) -> Result<Vec<PathBuf>, ReportError> {
     // Everything is rendered before anything is staged, and staged before anything is published.
     let html = render_html_full(c, predicted_msf, bonnets)?;
-    let mut set = write::Set::begin(dir)?;
+    let mut set = write::Set::begin(dir, "compare")?;
     let mut written = Vec::new();
     let json_path = dir.join("report.json");
     let doc = ReportJson {

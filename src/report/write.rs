@@ -65,10 +65,13 @@ pub struct Set {
 
 impl Set {
     /// Creates `dir` if needed and takes its lock (a second run writing there is refused).
-    pub fn begin(dir: &Path) -> Result<Set, WriteError> {
-        bonnetlab_io::atomic::OutputSet::begin(dir)
-            .map(|inner| Set { inner })
-            .map_err(|e| werr(dir, e))
+    /// `kind` names the command's set: on commit, the files the last set of that kind
+    /// published in `dir` and this one does not write are removed while unchanged
+    /// (`OutputSet::record_as`), so a run never leaves a former run's file beside its own.
+    pub fn begin(dir: &Path, kind: &str) -> Result<Set, WriteError> {
+        let mut inner = bonnetlab_io::atomic::OutputSet::begin(dir).map_err(|e| werr(dir, e))?;
+        inner.record_as(kind).map_err(|e| werr(dir, e))?;
+        Ok(Set { inner })
     }
 
     /// The final path of `name` in the directory.

@@ -11,6 +11,11 @@
 //!   first runs; every file is written whole into a staging directory inside DIR first, and only
 //!   when all are written are they renamed into place, one after another, so a failure part-way
 //!   (full disk, a name too long) leaves DIR exactly as it was, never new files beside old ones.
+//!   A set given a kind ([`OutputSet::record_as`]) keeps a record of what it published
+//!   (`DIR/.bonnetlab-KIND.outputs`: each file's name and a hash of its bytes); the next set of
+//!   that kind removes the files the last one published and this one does not write (a run
+//!   without the option that wrote them), but only while their bytes are still those it wrote:
+//!   a file the user changed, or one no record names, is never touched.
 //! - The destination, for both: an existing regular file is replaced; a symbolic link is
 //!   followed (the file it points to is replaced, the link is kept; a link to nothing is
 //!   refused); a FIFO, device, socket or directory is refused (write to stdout with `-` instead);
@@ -308,6 +313,84 @@ pub struct OutputSet {
     /// what it created again).
     created: Option<PathBuf>,
     lock: Option<DirLock>,
+    /// The kind of set, when it keeps a record of what it published ([`Self::record_as`]).
+    kind: Option<String>,
+    /// (name, hash of its bytes) of each staged file, for the record.
+    hashes: Vec<(PathBuf, u64)>,
+}
+
+/// 64-bit FNV-1a, the record's hash of a file's bytes (not cryptographic: it tells a file
+/// a set wrote from one the user has changed since).
+#[derive(Debug, Clone, Copy)]
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Fnv {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+    fn update(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 ^= u64::from(b);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+}
+
+/// A writer that hashes what passes through it.
+struct Hashing<W: Write> {
+    inner: W,
+    hash: Fnv,
+}
+
+impl<W: Write> Write for Hashing<W> {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let n = self.inner.write(buf)?;
+        self.hash.update(&buf[..n]);
+        Ok(n)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.inner.flush()
+    }
+}
+
+/// The hash of a file's bytes, or None when it cannot be read as a regular file (a link is
+/// not followed).
+fn file_hash(path: &Path) -> Option<u64> {
+    use std::io::Read;
+    let m = fs::symlink_metadata(path).ok()?;
+    if !m.file_type().is_file() {
+        return None;
+    }
+    let mut f = File::open(path).ok()?;
+    let mut h = Fnv::new();
+    let mut buf = vec![0u8; 1 << 16];
+    loop {
+        match f.read(&mut buf) {
+            Ok(0) => return Some(h.0),
+            Ok(n) => h.update(&buf[..n]),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(_) => return None,
+        }
+    }
+}
+
+/// The name of the record a set of `kind` keeps in its directory.
+fn record_name(kind: &str) -> String {
+    format!(".bonnetlab-{kind}.outputs")
+}
+
+/// The entries of a record (`HASH NAME` lines, the hash in hex); lines that do not read so are
+/// passed over.
+fn read_record(path: &Path) -> Vec<(PathBuf, u64)> {
+    let Ok(text) = fs::read_to_string(path) else {
+        return Vec::new();
+    };
+    text.lines()
+        .filter_map(|l| {
+            let (h, name) = l.split_once(' ')?;
+            Some((PathBuf::from(name), u64::from_str_radix(h, 16).ok()?))
+        })
+        .collect()
 }
 
 impl OutputSet {
@@ -356,7 +439,26 @@ impl OutputSet {
             committed: false,
             created,
             lock: Some(lock),
+            kind: None,
+            hashes: Vec::new(),
         })
+    }
+
+    /// Keeps a record of this set's files as a set of `kind` (letters, digits, `-` and `_`):
+    /// on commit, files the last set of that kind published here and this one does not write
+    /// are removed while their bytes are still what that set wrote (see the module doc).
+    pub fn record_as(&mut self, kind: &str) -> io::Result<()> {
+        if kind.is_empty()
+            || !kind
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            return Err(refuse(format!(
+                "{kind:?}: a set's kind is letters, digits, - and _"
+            )));
+        }
+        self.kind = Some(kind.to_string());
+        Ok(())
     }
 
     /// The directory the set is published into.
@@ -394,13 +496,25 @@ impl OutputSet {
         if let Some(p) = staged.parent() {
             fs::create_dir_all(p)?;
         }
+        if name.to_str().is_none_or(|n| n.contains('\n')) {
+            return Err(refuse(format!(
+                "{}: an output name must be UTF-8 on one line",
+                name.display()
+            )));
+        }
         let file = File::create(&staged)?;
-        let mut w = BufWriter::new(file);
+        let mut w = Hashing {
+            inner: BufWriter::new(file),
+            hash: Fnv::new(),
+        };
         fill(&mut w)?;
-        let file = w.into_inner().map_err(|e| e.into_error())?;
+        let hash = w.hash.0;
+        let file = w.inner.into_inner().map_err(|e| e.into_error())?;
         file.sync_all()?;
         self.files.retain(|(n, _)| n != name);
         self.files.push((name.to_path_buf(), dest));
+        self.hashes.retain(|(n, _)| n != name);
+        self.hashes.push((name.to_path_buf(), hash));
         Ok(())
     }
 
@@ -412,6 +526,19 @@ impl OutputSet {
     /// Publishes every staged file (in the order written), then removes the staging directory
     /// and the lock. Files whose destination is a symbolic link are written through the link.
     pub fn commit(mut self) -> io::Result<()> {
+        // The record is staged and published with the files; the last record is read first.
+        let last = match self.kind.clone() {
+            Some(kind) => {
+                let name = record_name(&kind);
+                let last = read_record(&self.dir.join(&name));
+                fs::write(self.staging.join(&name), self.record_text())?;
+                let dest = self.check(Path::new(&name))?;
+                self.files.retain(|(n, _)| n.as_os_str() != name.as_str());
+                self.files.push((PathBuf::from(name), dest));
+                Some(last)
+            }
+            None => None,
+        };
         // Directories first, so a rename cannot fail half-way for a missing parent.
         for (name, dest) in &self.files {
             if let Some(p) = dest.parent() {
@@ -432,10 +559,43 @@ impl OutputSet {
                 write_atomic(dest, &bytes)?;
             }
         }
+        if let Some(old) = &last {
+            self.retire(old);
+        }
         sync_dir(&self.dir);
         self.committed = true;
         let _ = fs::remove_dir_all(&self.staging);
         Ok(())
+    }
+
+    /// Removes the files of the last record that this set did not write, while their bytes
+    /// are still what that set wrote.
+    fn retire(&self, last: &[(PathBuf, u64)]) {
+        for (name, hash) in last {
+            if self.hashes.iter().any(|(n, _)| n == name) || self.check(name).is_err() {
+                continue;
+            }
+            let p = self.dir.join(name);
+            if file_hash(&p) == Some(*hash) && fs::remove_file(&p).is_ok() {
+                // Its directories inside `dir` go too once empty (`remove_dir` keeps any
+                // that holds something).
+                for d in p.ancestors().skip(1) {
+                    if d == self.dir || fs::remove_dir(d).is_err() {
+                        break;
+                    }
+                }
+            }
+        }
+    }
+
+    /// This set's record: a `HASH NAME` line a file, sorted by name.
+    fn record_text(&self) -> String {
+        let mut entries: Vec<&(PathBuf, u64)> = self.hashes.iter().collect();
+        entries.sort_by(|a, b| a.0.cmp(&b.0));
+        entries
+            .iter()
+            .map(|(name, hash)| format!("{hash:016x} {}\n", name.display()))
+            .collect()
     }
 }
 
@@ -643,5 +803,72 @@ mod tests {
         let mut set = OutputSet::begin(&dir).unwrap();
         assert!(set.write("../x", b"1").is_err());
         assert!(set.write("/tmp/x", b"1").is_err());
+    }
+
+    fn publish(dir: &Path, kind: &str, files: &[(&str, &[u8])]) {
+        let mut set = OutputSet::begin(dir).unwrap();
+        set.record_as(kind).unwrap();
+        for (n, b) in files {
+            set.write(n, b).unwrap();
+        }
+        set.commit().unwrap();
+    }
+
+    #[test]
+    fn a_set_removes_what_its_last_run_wrote_and_it_does_not() {
+        let d = tempfile::tempdir().unwrap();
+        let dir = d.path().join("out");
+        fs::create_dir(&dir).unwrap();
+        fs::write(dir.join("mine.txt"), b"the user's").unwrap();
+        publish(
+            &dir,
+            "sim",
+            &[
+                ("a.json", b"1"),
+                ("sweep.csv", b"2"),
+                ("sub/c.csv", b"3"),
+                ("edited.txt", b"4"),
+            ],
+        );
+        publish(&dir, "other", &[("z.txt", b"z")]);
+        fs::write(dir.join("edited.txt"), b"changed by the user").unwrap();
+        publish(&dir, "sim", &[("a.json", b"5")]);
+        assert_eq!(fs::read(dir.join("a.json")).unwrap(), b"5");
+        assert!(!dir.join("sweep.csv").exists());
+        assert!(!dir.join("sub").exists(), "its emptied directory too");
+        // Changed since, never recorded, or another kind's: kept.
+        assert_eq!(
+            fs::read(dir.join("edited.txt")).unwrap(),
+            b"changed by the user"
+        );
+        assert_eq!(fs::read(dir.join("mine.txt")).unwrap(), b"the user's");
+        assert_eq!(fs::read(dir.join("z.txt")).unwrap(), b"z");
+        let rec = fs::read_to_string(dir.join(".bonnetlab-sim.outputs")).unwrap();
+        assert_eq!(rec.lines().count(), 1, "{rec}");
+        assert!(rec.ends_with(" a.json\n"), "{rec}");
+    }
+
+    #[test]
+    fn an_unpublished_set_or_a_foreign_record_removes_nothing() {
+        let d = tempfile::tempdir().unwrap();
+        let dir = d.path().join("out");
+        publish(&dir, "sim", &[("a.json", b"1"), ("b.csv", b"2")]);
+        {
+            let mut set = OutputSet::begin(&dir).unwrap();
+            set.record_as("sim").unwrap();
+            set.write("a.json", b"3").unwrap();
+        } // dropped without commit
+        assert_eq!(fs::read(dir.join("b.csv")).unwrap(), b"2");
+        // A record naming a file outside the directory is passed over.
+        fs::write(d.path().join("outside.txt"), b"x").unwrap();
+        let h = file_hash(&d.path().join("outside.txt")).unwrap();
+        fs::write(
+            dir.join(".bonnetlab-sim.outputs"),
+            format!("{h:016x} ../outside.txt\n"),
+        )
+        .unwrap();
+        publish(&dir, "sim", &[("a.json", b"4")]);
+        assert!(d.path().join("outside.txt").exists());
+        assert!(OutputSet::begin(&dir).unwrap().record_as("a/b").is_err());
     }
 }

@@ -36,6 +36,8 @@ pub fn write_run_with_recipe(
     recipe: &str,
 ) -> Result<PathBuf, CalibrateError> {
     let mut set = OutputSet::begin(dir).map_err(|e| io_err(format!("{}: {e}", dir.display())))?;
+    set.record_as("synth")
+        .map_err(|e| io_err(format!("{}: {e}", dir.display())))?;
     for (name, bytes) in run_files(run, recipe)? {
         set.write(&name, &bytes)
             .map_err(|e| io_err(format!("{}: {e}", dir.join(&name).display())))?;
