@@ -134,6 +134,16 @@ pub struct VibrationSummary {
     /// σ1 at 1/pitch (Y) of the predicted and of the baseline removal, nm.
     pub removal_ripple_sigma1_nm: Option<f64>,
     pub baseline_removal_ripple_sigma1_nm: Option<f64>,
+    /// Why `ripple` and the σ1 fields are null (no pitch in the recipe); absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ripple_reason: Option<String>,
+}
+
+/// Why a ripple is not evaluated: no pitch in the recipe (None with a pitch).
+fn no_pitch_reason(pitch_mm: Option<f64>) -> Option<String> {
+    pitch_mm
+        .is_none()
+        .then(|| "no [path] pitch_mm in the recipe: ripple not evaluated".to_string())
 }
 
 const SHARE_BASIS: &str = "fraction of the summed MSF band power (Y, msf_band_per_mm) of all \
@@ -319,14 +329,12 @@ pub fn simulate(
                 induced_msf_band_rms_nm: pred.induced_msf_band_rms_nm,
                 removal_ripple_sigma1_nm: pred.ripple_sigma1_nm,
                 baseline_removal_ripple_sigma1_nm: pred.baseline_ripple_sigma1_nm,
+                ripple_reason: no_pitch_reason(recipe.pitch_mm),
             };
             (mech, Some(summary))
         }
     };
-    let ripple_reason = recipe
-        .pitch_mm
-        .is_none()
-        .then(|| "no [path] pitch_mm in the recipe: ripple not evaluated".to_string());
+    let ripple_reason = no_pitch_reason(recipe.pitch_mm);
     if let Some(why) = &ripple_reason {
         notes.push(why.clone());
     }

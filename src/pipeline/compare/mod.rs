@@ -334,6 +334,13 @@ fn analyse_run(
     } else {
         None
     };
+    let spread_reason = spread.is_none().then(|| {
+        format!(
+            "{} before and {} after map(s): a spread over repeats needs at least two of each",
+            mb.len(),
+            ma.len()
+        )
+    });
 
     let psd = RunPsds {
         x_before: Some(mean_psd(mb.iter().map(|m| &m.px))),
@@ -509,6 +516,7 @@ fn analyse_run(
         pv_before_each_nm: pb,
         pv_after_each_nm: pa,
         spread,
+        spread_reason,
         bands,
         band_fine,
         band_rms,

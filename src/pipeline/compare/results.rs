@@ -127,6 +127,9 @@ pub struct RunResult {
     pub pv_before_each_nm: Vec<f64>,
     pub pv_after_each_nm: Vec<f64>,
     pub spread: Option<RunSpread>,
+    /// Why there is no `spread` (fewer than two before or two after maps); absent otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spread_reason: Option<String>,
     /// figure, MSF (areal band RMS, means over repeats) and ripple.
     pub bands: Vec<BandCr>,
     /// The fine band (above F2) of the same areal split.
