@@ -132,6 +132,25 @@ fn case_a_json_and_outputs() {
     ] {
         assert!(out.join(f).is_file(), "{f}");
     }
+    // The CSV grids say what they hold, and the dwell map reads back to the JSON's total.
+    let head = std::fs::read_to_string(out.join("dwell_s.csv")).unwrap();
+    assert!(
+        head.starts_with("# bonnetlab dwell map: seconds per pixel;"),
+        "{}",
+        &head[..80]
+    );
+    let dwell = bonnetlab::io::read_surface(&out.join("dwell_s.csv")).unwrap();
+    let sum: f64 = dwell.heights_nm().iter().filter(|v| v.is_finite()).sum();
+    assert!(
+        (sum - v["total_dwell_s"].as_f64().unwrap()).abs() < 1e-6 * sum,
+        "{sum} s"
+    );
+    let binding = std::fs::read_to_string(out.join("feed_binding.csv")).unwrap();
+    assert!(
+        binding.starts_with("# bonnetlab feed limit"),
+        "{}",
+        &binding[..60]
+    );
     // The residual map written is the one the JSON describes.
     let res = bonnetlab::io::read_surface(&out.join("residual.dat")).unwrap();
     let st = bonnetlab::surface::height_stats(&res).unwrap();

@@ -156,7 +156,19 @@ fn stage_outputs(dir: &Path, solved: &SolvedCase) -> Result<report::write::Set, 
             .map_err(|e| CliError::processing(dir.join(name), e))?;
         set.bytes(name, &bytes).map_err(werr)
     };
-    map(&mut set, "dwell_s.csv", &maps.dwell_s, MapFormat::Csv)?;
+    // The CSV grids say what they hold (the generic writer's header says heights in nm).
+    let grid = |set: &mut report::write::Set, name: &str, s: &Surface, what: &str| {
+        let mut bytes = Vec::new();
+        bonnetlab_io::csv_grid::write_labelled(s, &mut bytes, what)
+            .map_err(|e| CliError::processing(dir.join(name), e))?;
+        set.bytes(name, &bytes).map_err(werr)
+    };
+    grid(
+        &mut set,
+        "dwell_s.csv",
+        &maps.dwell_s,
+        "dwell map: seconds per pixel",
+    )?;
     map(
         &mut set,
         "residual.dat",
@@ -169,11 +181,11 @@ fn stage_outputs(dir: &Path, solved: &SolvedCase) -> Result<report::write::Set, 
         &maps.realised_residual_nm,
         MapFormat::MetroProDat,
     )?;
-    map(
+    grid(
         &mut set,
         "feed_binding.csv",
         &maps.feed_binding,
-        MapFormat::Csv,
+        "feed limit that binds per pixel: 0 none, 1 velocity, 2 acceleration",
     )?;
     let png = |set: &mut report::write::Set,
                name: &str,

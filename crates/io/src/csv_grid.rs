@@ -153,9 +153,15 @@ fn num(v: &str, line_no: usize, key: &str) -> Result<f64, ParseError> {
 
 /// Writes a surface as a CSV grid (see the module doc for the layout).
 pub fn write(s: &Surface, w: &mut dyn Write) -> std::io::Result<()> {
+    write_labelled(s, w, "surface map: heights in nm")
+}
+
+/// [`write`] for a grid of another quantity: `what` names it and its unit in the first
+/// comment line (for example `dwell map: seconds per pixel`).
+pub fn write_labelled(s: &Surface, w: &mut dyn Write, what: &str) -> std::io::Result<()> {
     writeln!(
         w,
-        "# bonnetlab surface map: heights in nm; rows = Y, columns = X; empty cell = invalid pixel"
+        "# bonnetlab {what}; rows = Y, columns = X; empty cell = invalid pixel"
     )?;
     let mut meta = Vec::new();
     if let Some(dx) = s.dx_mm {

@@ -57,6 +57,10 @@ pub struct Harmonic {
 }
 
 /// Ripple metrics (field names as in shared/spec/interfaces.md `ripple`).
+/// sigma_1 at or below this fraction of the Y profile's RMS is rounding residue, never a
+/// detected ripple (f64 arithmetic leaves ~1e-16 of the RMS in every bin).
+pub const ROUNDING_FLOOR: f64 = 1e-10;
+
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Ripple {
     pub pitch_mm: f64,
@@ -194,14 +198,26 @@ pub fn ripple_from_psds(
         0.0
     };
     let sigma1_x = band_rms(x, f0 - h, f0 + h);
-    let detected = prominence_db >= ropts.prominence_threshold_db;
-    let verdict = format!(
-        "{}: prominence {:.1} dB {} the {} dB threshold",
-        if detected { "detected" } else { "not detected" },
-        prominence_db,
-        if detected { ">=" } else { "<" },
-        ropts.prominence_threshold_db
-    );
+    // A peak is a ripple only above the arithmetic's own floor: a map with nothing along Y
+    // still leaves rounding residue of ~1e-16 of its RMS in every bin, and a ratio of two such
+    // residues can be any number of dB.
+    let y_rms = y.psd_nm2_mm.iter().map(|p| p * df).sum::<f64>().sqrt();
+    let above_rounding = sigma1 > ROUNDING_FLOOR * y_rms;
+    let detected = above_rounding && prominence_db >= ropts.prominence_threshold_db;
+    let verdict = if above_rounding {
+        format!(
+            "{}: prominence {:.1} dB {} the {} dB threshold",
+            if detected { "detected" } else { "not detected" },
+            prominence_db,
+            if detected { ">=" } else { "<" },
+            ropts.prominence_threshold_db
+        )
+    } else {
+        format!(
+            "not detected: sigma_1 {sigma1:.3e} nm is rounding residue (under {ROUNDING_FLOOR:e} of \
+             the Y profile's RMS, {y_rms:.3e} nm)"
+        )
+    };
     Ok(Ripple {
         pitch_mm,
         f0_per_mm: f0,
