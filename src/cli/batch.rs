@@ -30,7 +30,7 @@ pub struct Args {
     /// A directory of maps, a manifest (one map path per line), or a single map.
     pub input: PathBuf,
     /// Grating spacing in mm: adds each map's `ripple` object.
-    #[arg(long, value_parser = super::num::positive)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::num::positive)]
     pub pitch_mm: Option<f64>,
     /// Form terms removed before the statistics and the PSD (comma list).
     #[arg(long, default_value = "piston,tilt")]
@@ -39,13 +39,18 @@ pub struct Args {
     #[arg(long, default_value = "hann")]
     pub window: String,
     /// Pixel size in mm for maps whose file does not carry one (a file's own value wins).
-    #[arg(long, value_name = "MM")]
+    #[arg(long, allow_negative_numbers = true, value_name = "MM")]
     pub pixel_mm: Option<f64>,
     /// Pixel size along Y (rows) in mm when it differs from --pixel-mm.
-    #[arg(long, value_name = "MM", requires = "pixel_mm")]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "MM",
+        requires = "pixel_mm"
+    )]
     pub pixel_mm_y: Option<f64>,
     /// Worker threads, 1 to 1024 (default: all cores).
-    #[arg(long, value_parser = super::num::jobs)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::num::jobs)]
     pub jobs: Option<usize>,
 }
 

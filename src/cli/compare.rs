@@ -23,7 +23,7 @@ pub struct Args {
     #[arg(long = "run", value_name = "NAME=BEFORE,AFTER", required = true)]
     pub runs: Vec<String>,
     /// Grating (raster) spacing in mm: enables the ripple check and the f0 markers.
-    #[arg(long, value_parser = super::num::positive)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::num::positive)]
     pub pitch_mm: Option<f64>,
     /// Form terms removed from every map before PV / RMS / PSD (comma list).
     #[arg(long, default_value = "piston,tilt")]
@@ -32,10 +32,15 @@ pub struct Args {
     #[arg(long, default_value = "hann")]
     pub window: String,
     /// Pixel size in mm for maps whose file does not carry one (a file's own value wins).
-    #[arg(long, value_name = "MM")]
+    #[arg(long, allow_negative_numbers = true, value_name = "MM")]
     pub pixel_mm: Option<f64>,
     /// Pixel size along Y (rows) in mm when it differs from --pixel-mm.
-    #[arg(long, value_name = "MM", requires = "pixel_mm")]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "MM",
+        requires = "pixel_mm"
+    )]
     pub pixel_mm_y: Option<f64>,
     /// Output directory (created if missing).
     #[arg(long)]

@@ -64,7 +64,7 @@ pub struct Args {
     #[arg(long, default_value_t = SAMPLE_SEED)]
     pub seed: u64,
     /// Repeat measurements per map in the generated sample (1 to 10000).
-    #[arg(long, default_value_t = 2, value_parser = super::num::repeats)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 2, value_parser = super::num::repeats)]
     pub repeats: usize,
 }
 

@@ -67,10 +67,10 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "min-dwell")]
     pub method: Method,
     /// min-dwell: least total dwell with residual RMS <= this (nm).
-    #[arg(long, conflicts_with = "max_dwell_min")]
+    #[arg(long, allow_negative_numbers = true, conflicts_with = "max_dwell_min")]
     pub target_rms_nm: Option<f64>,
     /// min-dwell: least residual with total dwell <= this (min).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub max_dwell_min: Option<f64>,
     /// min-dwell: healing (ADMM) iterations per trade-off point, on the coarse grid when one
     /// is used (more: lower residual at the same total dwell, slower). Default: 80 on the full

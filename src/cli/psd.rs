@@ -53,10 +53,10 @@ pub struct Args {
     #[arg(long, default_value = "hann")]
     pub window: String,
     /// Taper fraction of the Tukey window (0 = none, 1 = Hann).
-    #[arg(long, default_value_t = 0.5, value_parser = super::num::non_negative)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.5, value_parser = super::num::non_negative)]
     pub tukey_alpha: f64,
     /// Raster pitch (grating spacing) in mm: adds the ripple check at f0 = 1/pitch along Y.
-    #[arg(long, value_parser = super::num::positive)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::num::positive)]
     pub pitch_mm: Option<f64>,
     /// Comma list of form terms removed jointly from the whole map before the PSDs.
     #[arg(long, default_value = "piston,tilt")]
@@ -65,7 +65,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "mean")]
     pub detrend: DetrendArg,
     /// Longest dropout (pixels) inside a line that is filled by linear interpolation.
-    #[arg(long, default_value_t = 5, value_parser = super::num::pixels)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5, value_parser = super::num::pixels)]
     pub max_gap_px: usize,
     /// Shortest line segment analysed, pixels. Every segment at least this long is used, each
     /// from its own first unbiased bin (ceil(b N / m) for a segment of m of N samples) up. A
@@ -74,17 +74,17 @@ pub struct Args {
     pub min_segment_px: usize,
     /// Also skip segments shorter than this fraction of the line (0 = use every segment; 0.5
     /// reproduces the segment choice before issue #19, for comparisons).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.0)]
     pub min_segment_fraction: f64,
     /// Also compute the 2-D PSD's radial forms (JSON `radial`: azimuthal average, two-sided
     /// nm^2 mm^2, and azimuthally integrated, nm^2 mm).
     #[arg(long)]
     pub radial: bool,
     /// Highest ripple harmonic considered (0 to 1000).
-    #[arg(long, default_value_t = 5, value_parser = super::num::harmonics)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5, value_parser = super::num::harmonics)]
     pub harmonics: usize,
     /// Prominence (dB over the flanking median) at which the ripple counts as detected.
-    #[arg(long, default_value_t = bonnetlab_spectrum::PROMINENCE_THRESHOLD_DB, value_parser = super::num::finite)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = bonnetlab_spectrum::PROMINENCE_THRESHOLD_DB, value_parser = super::num::finite)]
     pub prominence_threshold_db: f64,
     /// MSF band edges F1,F2 in mm^-1 (default 1/33,1/0.12 i.e. periods 33 mm to 0.12 mm).
     #[arg(long, value_name = "F1,F2")]
@@ -100,10 +100,15 @@ pub struct Args {
     pub convention: Option<Convention>,
     /// Pixel size in mm for a map whose file says it is unknown (square pixels unless
     /// --pixel-mm-y is given).
-    #[arg(long, value_name = "MM")]
+    #[arg(long, allow_negative_numbers = true, value_name = "MM")]
     pub pixel_mm: Option<f64>,
     /// Pixel size along Y (rows) in mm when it differs from --pixel-mm.
-    #[arg(long, value_name = "MM", requires = "pixel_mm")]
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        value_name = "MM",
+        requires = "pixel_mm"
+    )]
     pub pixel_mm_y: Option<f64>,
     /// Print one JSON object instead of a summary.
     #[arg(long)]

@@ -40,11 +40,11 @@ pub struct Args {
     #[arg(long, default_value = "parabolic")]
     pub pressure: String,
     /// Starting bonnet radius of the fit, mm.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 20.0)]
     pub start_radius_mm: f64,
     /// Effective contact modulus (MPa) used as start, and held when the sweep cannot separate it
     /// from the Preston coefficient (no offset or pressure variation).
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 2.0)]
     pub modulus_mpa: f64,
     /// Write the bundled synthetic sample sweep (maps + manifest.toml) into this directory
     /// and exit.

@@ -32,7 +32,7 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Length of the time series written to DIR, seconds.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 10.0)]
     pub duration_s: f64,
     /// Seed of the broadband force noise in the time series.
     #[arg(long, default_value_t = 1)]

@@ -45,7 +45,7 @@ pub fn sweep(
             return Err(Error::input(
                 &e.path,
                 format!(
-                    "the pixel size is unknown (the file carries 0): a spot map must carry its \
+                    "the pixel size is unknown (the file does not give one): a spot map must carry its \
                      pixel size (listed at {} line {})",
                     manifest.display(),
                     e.line

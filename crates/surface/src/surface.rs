@@ -178,7 +178,7 @@ impl Surface {
         match (self.dx_mm, self.dy_mm) {
             (Some(dx), Some(dy)) => Ok((dx, dy)),
             _ => Err(SurfaceError::InvalidArgument(format!(
-                "the pixel size is unknown (the file carries 0); {purpose} needs it: give it explicitly"
+                "the pixel size is unknown (the file does not give one); {purpose} needs it: give it explicitly"
             ))),
         }
     }
