@@ -114,24 +114,27 @@ impl RunInput {
     /// Reads a recipe and everything it names; errors name the file at fault.
     pub fn load(name: &str, recipe_file: &Path) -> Result<RunInput, BonnetsError> {
         let recipe = Recipe::load(recipe_file).map_err(|e| BonnetsError::input(recipe_file, e))?;
-        let read = |p: &Path| {
+        let read = |p: &Path, key: &str| {
             bonnetlab_io::read_surface(p).map_err(|e| {
                 let code = e.exit_code();
-                BonnetsError::new(p, e, code)
+                let mut err = BonnetsError::new(p, e, code);
+                err.message
+                    .push_str(&bonnetlab_process::recipe::named_by(recipe_file, key));
+                err
             })
         };
-        let before = read(&recipe.before)?;
+        let before = read(&recipe.before, "[measurement] before")?;
         let after_path = recipe.after.clone().ok_or_else(|| {
             BonnetsError::input(
                 recipe_file,
                 "[measurement] after: missing (a compared run needs the after map)",
             )
         })?;
-        let after = read(&after_path)?;
+        let after = read(&after_path, "[measurement] after")?;
         bonnetlab_process::recipe::check_measured_removal(&before, &after)
             .map_err(|e| BonnetsError::input(&after_path, e))?;
         let spot = match &recipe.tif {
-            TifSource::Spot { path, .. } => Some(read(path)?),
+            TifSource::Spot { path, .. } => Some(read(path, "[tif] spot")?),
             _ => None,
         };
         let path = bonnetlab_process::path::read_path_csv(&recipe.path_log)

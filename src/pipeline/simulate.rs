@@ -185,11 +185,18 @@ pub fn simulate(
     let step = |msg: &str| progress.step(msg);
     step("recipe");
     let recipe = Recipe::load(recipe_file).map_err(|e| perr(recipe_file, e))?;
-    let before = read_map(&recipe.before)?;
+    let named = |key: &str| {
+        let by = bonnetlab_process::recipe::named_by(recipe_file, key);
+        move |mut e: Error| {
+            e.message.push_str(&by);
+            e
+        }
+    };
+    let before = read_map(&recipe.before).map_err(named("[measurement] before"))?;
     let grid = Grid::of(&before).map_err(|e| perr(&recipe.before, e.into()))?;
     step("tif");
     let spot = match &recipe.tif {
-        TifSource::Spot { path, .. } => Some(read_map(path)?),
+        TifSource::Spot { path, .. } => Some(read_map(path).map_err(named("[tif] spot"))?),
         _ => None,
     };
     let spot_file = match &recipe.tif {

@@ -85,28 +85,31 @@ pub fn problem_with_spot(
 /// Reads everything a recipe names and prepares the problem; errors name the file at fault.
 pub fn load_recipe(recipe_path: &Path) -> Result<Problem, PipelineError> {
     let recipe = Recipe::load(recipe_path).map_err(|e| PipelineError::input(recipe_path, e))?;
-    let read = |p: &Path| {
+    let read = |p: &Path, key: &str| {
         bonnetlab_io::read_surface(p).map_err(|e| PipelineError {
             file: p.to_path_buf(),
             exit_code: e.exit_code(),
-            message: e.to_string(),
+            message: format!(
+                "{e}{}",
+                bonnetlab_process::recipe::named_by(recipe_path, key)
+            ),
         })
     };
-    let before = read(&recipe.before)?;
+    let before = read(&recipe.before, "[measurement] before")?;
     let after_path = recipe.after.clone().ok_or_else(|| {
         PipelineError::input(
             recipe_path,
             "[measurement] after: missing (calibrate needs the after map)",
         )
     })?;
-    let after = read(&after_path)?;
+    let after = read(&after_path, "[measurement] after")?;
     // The after map's own pixel size is needed too: an unknown one is the after map's fault,
     // named here (Problem::new would report it against the recipe).
     after
         .pixel_mm("calibration")
         .map_err(|e| PipelineError::input(&after_path, e))?;
     let (spot, spot_file) = match &recipe.tif {
-        TifSource::Spot { path, .. } => (Some(read(path)?), path.clone()),
+        TifSource::Spot { path, .. } => (Some(read(path, "[tif] spot")?), path.clone()),
         _ => (None, recipe_path.to_path_buf()),
     };
     let path = bonnetlab_process::path::read_path_csv(&recipe.path_log)

@@ -238,6 +238,13 @@ impl Ctx<'_> {
     }
 }
 
+/// Which key of which recipe names a map, said after an error about that map (a missing or
+/// unreadable file is then traced to the line that asked for it): `" (named by [measurement]
+/// before in run.toml)"`.
+pub fn named_by(recipe_file: &Path, key: &str) -> String {
+    format!(" (named by {key} in {})", recipe_file.display())
+}
+
 /// Checks that a run's two maps record a removal: maps whose valid pixels coincide and hold
 /// the same heights (the same file named twice, or one measurement saved twice) leave nothing to
 /// compare or calibrate, and every model fitted to them would report a zero rate as a result.
