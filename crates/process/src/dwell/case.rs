@@ -60,16 +60,39 @@ struct CaseTif {
     peak_rate_nm_per_s: Option<f64>,
 }
 
-/// `rows` / `cols` are the clear aperture; `x_mm` / `y_mm` (informative) the same in mm.
+/// Relative difference allowed between a case's `pixel_mm` and the pixel size its map
+/// carries (MetroPro stores it in single precision: 2.5e-8 of 0.1 mm).
+const PIXEL_TOLERANCE: f64 = 1e-6;
+
+/// `rows` / `cols` are the clear aperture; `x_mm` / `y_mm` (optional) the same in mm: the
+/// centres of its first and last columns (rows), `[start * pixel_mm, (end - 1) * pixel_mm]`,
+/// checked against `rows` / `cols` to half a pixel.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CaseAperture {
     rows: Option<[i64; 2]>,
     cols: Option<[i64; 2]>,
-    #[allow(dead_code)]
     x_mm: Option<[f64; 2]>,
-    #[allow(dead_code)]
     y_mm: Option<[f64; 2]>,
+}
+
+/// Checks an aperture's extent in mm (`key`, the centres of its first and last pixels) against
+/// its pixel range [start, end) at `pixel_mm`, to half a pixel.
+fn check_extent_mm(
+    mm: Option<[f64; 2]>,
+    (start, end): (usize, usize),
+    pixel_mm: f64,
+) -> Result<(), String> {
+    let Some([a, b]) = mm else { return Ok(()) };
+    let want = [start as f64 * pixel_mm, (end - 1) as f64 * pixel_mm];
+    if (a - want[0]).abs() > 0.5 * pixel_mm || (b - want[1]).abs() > 0.5 * pixel_mm {
+        return Err(format!(
+            "[{a}, {b}] mm disagrees with pixels [{start}, {end}) at {pixel_mm} mm, whose first \
+             and last centres are [{}, {}] mm",
+            want[0], want[1]
+        ));
+    }
+    Ok(())
 }
 
 #[derive(Debug, Clone, Default, Deserialize)]
@@ -168,13 +191,17 @@ impl DwellCase {
             .clear_aperture
             .as_ref()
             .ok_or_else(|| err("[clear_aperture]", "missing table".into()))?;
+        let ca_rows = range(ca.rows, "[clear_aperture] rows")?;
+        let ca_cols = range(ca.cols, "[clear_aperture] cols")?;
+        check_extent_mm(ca.x_mm, ca_cols, pixel_mm).map_err(|e| err("[clear_aperture] x_mm", e))?;
+        check_extent_mm(ca.y_mm, ca_rows, pixel_mm).map_err(|e| err("[clear_aperture] y_mm", e))?;
         Ok(DwellCase {
             file: path.to_path_buf(),
             surface,
             pixel_mm,
             tif,
-            ca_rows: range(ca.rows, "[clear_aperture] rows")?,
-            ca_cols: range(ca.cols, "[clear_aperture] cols")?,
+            ca_rows,
+            ca_cols,
             limits: machine_limits(doc.machine.as_ref(), &err)?,
             reference: doc.reference,
         })
@@ -203,6 +230,21 @@ impl DwellCase {
     /// dwell grid = CA grown by the TIF half-width. Invalid pixels of the dwell grid (at most
     /// 10 %) are filled from their valid neighbours and left out of the clear aperture.
     pub fn problem(&self, map: &Surface) -> Result<CaseProblem, ProcessError> {
+        // A pixel size the map carries wins over any other (conventions.md): a case that
+        // says another one describes a different map.
+        for (axis, d) in [("x", map.dx_mm), ("y", map.dy_mm)] {
+            if let Some(d) = d {
+                if (d - self.pixel_mm).abs() > PIXEL_TOLERANCE * self.pixel_mm {
+                    return Err(ProcessError::invalid(format!(
+                        "{}: pixel_mm = {} but the map {} carries {d} mm along {axis}; give the \
+                         map's pixel size",
+                        self.file.display(),
+                        self.pixel_mm,
+                        self.surface.display()
+                    )));
+                }
+            }
+        }
         let tif = self.sampled_tif()?;
         let (h0, h1) = tif.half_widths();
         let (r0, r1) = self.ca_rows;
@@ -534,5 +576,42 @@ mod tests {
         let map = Surface::with_mask(z, sparse, Some(0.5), Some(0.5)).unwrap();
         let e = c.problem(&map).unwrap_err().to_string();
         assert!(e.contains("pixels are invalid in the map"), "{e}");
+    }
+
+    /// The aperture in mm must say what its pixel range says (reviewer: `x_mm = [500, 600]`
+    /// on a 210 mm map was accepted); the public cases' own values pass.
+    #[test]
+    fn an_aperture_in_mm_that_contradicts_its_pixels_is_refused() {
+        // cols [10, 30) at 0.5 mm: first and last centres 5.0 and 14.5 mm.
+        assert!(parse(&format!("{GOOD}x_mm = [5.0, 14.5]\ny_mm = [5.0, 9.5]\n")).is_ok());
+        assert!(parse(&format!("{GOOD}x_mm = [5.2, 14.3]\n")).is_ok());
+        let e = parse(&format!("{GOOD}x_mm = [500.0, 600.0]\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("case.toml") && e.contains("[clear_aperture] x_mm"),
+            "{e}"
+        );
+        assert!(e.contains("[5, 14.5] mm"), "{e}");
+        let e = parse(&format!("{GOOD}y_mm = [5.0, 10.0]\n"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("[clear_aperture] y_mm"), "{e}");
+    }
+
+    /// A map that carries its pixel size decides it: a case saying another is refused, a
+    /// single-precision copy of the same value is not.
+    #[test]
+    fn a_case_pixel_size_the_map_contradicts_is_refused() {
+        let c = parse(GOOD).unwrap();
+        let h = Array2::from_shape_fn((40, 50), |(i, j)| ((i * 7 + j * 3) % 11) as f64);
+        let same = Surface::new(h.clone(), Some(0.5f32 as f64), Some(0.5f32 as f64)).unwrap();
+        assert!(c.problem(&same).is_ok());
+        let other = Surface::new(h, Some(0.36), Some(0.36)).unwrap();
+        let e = c.problem(&other).unwrap_err().to_string();
+        assert!(
+            e.contains("case.toml") && e.contains("pixel_mm = 0.5") && e.contains("0.36"),
+            "{e}"
+        );
     }
 }
