@@ -1,8 +1,10 @@
 //! Power spectral densities of surface maps (1-D along X and Y, 2-D, radial), band-limited RMS
 //! and the ripple check at the raster's grating spacing. Conventions: `shared/spec/metrology.md`.
 //!
-//! Band RMS values for reports come from `areal` (brick-wall bands of the map's 2-D DCT, holes
-//! filled, bands that add up to Sq exactly); `band` integrates a PSD and is labelled as a PSD quantity.
+//! Band RMS values for reports come from `areal` (brick-wall bands of the map's orthonormal 2-D
+//! transform, each axis's border mirrored or periodic, holes filled, band powers by a projection
+//! over the valid pixels that is never negative and adds up to Sq^2 exactly); `band` integrates
+//! a PSD and is labelled as a PSD quantity.
 //!
 //! Every PSD says its sidedness: `Psd1d` is ONE-SIDED (nm^2 mm), `Psd2d` is TWO-SIDED
 //! (nm^2 mm^2), the radial forms are labelled (`integrated_nm2_mm`, `average_nm2_mm2`).
