@@ -5,7 +5,7 @@
 //! the height parameters of the residual over the valid pixels: a JSON object with `--json`
 //! (stable field order, no time stamps), a small table otherwise. With `--bands`, also the
 //! figure / MSF / fine band RMS of the same residual (`bonnetlab_spectrum::band_split`: areal
-//! Gaussian filters, bands that add up to Sq exactly; a band the map cannot resolve is null
+//! brick-wall bands projected over the valid pixels, adding up to Sq exactly; a band the map cannot resolve is null
 //! with a reason). With `--minus`, the statistics of `FILE - FILE2` on the pixels valid in both
 //! (two maps of one grid): of two measurements of an unchanged part with piston and tilt
 //! removed, the RMS is the instrument's repeatability that a recipe may declare.

@@ -312,7 +312,7 @@ fn bands_section(page: &mut Page, c: &Comparison) {
         "how measured / why absent",
     ];
     let mut t = Table::new(header).caption(
-        "Band RMS of the maps themselves (areal Gaussian split on the run's aperture): figure, \
+        "Band RMS of the maps themselves (areal split by radial frequency on the run's aperture: brick-wall bands of the map's 2-D transform, projected over its valid pixels): figure, \
          MSF and fine add up in quadrature to the RMS of the summary table. A band the maps \
          cannot resolve is absent, with the reason.",
     );

@@ -15,8 +15,9 @@
 //! - PSDs are one-sided 1-D PSDs in nm^2 mm (bonnetlab_spectrum), averaged over repeats; the
 //!   ripple is computed from the averaged X and Y PSDs;
 //! - band RMS values (figure below F1, MSF F1..F2, fine above F2) are the areal split of the
-//!   map itself (`bonnetlab_spectrum::band_split`: ISO Gaussian filters honouring the
-//!   aperture; the bands add up to the map RMS exactly); a band the map cannot resolve is
+//!   map itself (`bonnetlab_spectrum::band_split`: brick-wall bands of the map's 2-D
+//!   transform, projected over its valid pixels low band first, so they add up to the map RMS
+//!   exactly and none is negative); a band the map cannot resolve is
 //!   absent with a reason. The 2-D PSD annulus values (Hann window) stay as a labelled PSD
 //!   quantity (`bands_psd`); the ripple band's CR uses the ripple's sigma_total (Y PSD,
 //!   harmonic bands), absent with a reason when the pitch cannot be resolved.
