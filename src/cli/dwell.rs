@@ -22,6 +22,8 @@
 //! (TIF 2.8 px) stays on the full grid, case B (11.8 px) uses s = 5. `--coarsen N` overrides
 //! (1: the full grid). Every method's map is then realised as a
 //! raster feed under the case's `[machine]` limits and the executed residual reported (`feed`).
+//! A min-dwell sweep that did not converge (`convergence`) still writes its outputs, with a
+//! `note`, and the command ends with exit code 1.
 
 use std::path::{Path, PathBuf};
 
@@ -129,7 +131,11 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     if !json_on_stdout {
         super::println_stdout(&report::dwell_report::summary(report, &written(args)))?;
     }
-    Ok(())
+    // An answer that did not converge is written (to be looked at) but never passes as one.
+    match &report.note {
+        Some(note) => Err(CliError::processing(&args.case, note)),
+        None => Ok(()),
+    }
 }
 
 /// The files `dwell` wrote, as its summary names them.

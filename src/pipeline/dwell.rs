@@ -12,8 +12,8 @@ use std::time::Instant;
 use bonnetlab_process::dwell::auto_coarsening;
 use bonnetlab_process::dwell::feed::{realise, FeedRealisation, FeedSummary};
 use bonnetlab_process::dwell::{
-    solve_iterative, solve_rifta, DwellCase, DwellSolution, DwellTarget, IterativeOptions,
-    MinDwell, MinDwellOptions, RiftaOptions, TradeOffPoint,
+    solve_iterative, solve_rifta, Convergence, DwellCase, DwellSolution, DwellTarget,
+    IterativeOptions, MinDwell, MinDwellOptions, RiftaOptions, TradeOffPoint,
 };
 use bonnetlab_surface::Surface;
 use ndarray::Array2;
@@ -70,9 +70,16 @@ pub struct DwellReport {
     /// Residual vs total dwell (min-dwell: one point per extra uniform removal, `parameter`
     /// in nm; other methods: their knob).
     pub trade_off: Vec<TradeOffPoint>,
-    /// What was asked of the trade-off, and whether the chosen point meets it.
+    /// What was asked of the trade-off, and whether the chosen point meets it: the residual
+    /// target, or the dwell budget, and (min-dwell) a converged sweep; with neither target, a
+    /// converged sweep.
     pub target: DwellTarget,
     pub target_met: bool,
+    /// min-dwell: whether the sweep reached what the TIF can do (its best residual against the
+    /// unconstrained inverse filter's); null for the other methods.
+    pub convergence: Option<Convergence>,
+    /// Why the answer should not be trusted (a sweep that did not converge); null otherwise.
+    pub note: Option<String>,
     /// Extra uniform removal of the chosen point (nm; min-dwell only).
     pub offset_nm: Option<f64>,
     /// Time of one point's solve (s): the shared start plus the sweep's mean healing and
@@ -161,6 +168,7 @@ pub fn solve_case(
     let pe = |e| proc_err(case_file, e);
     let t0 = Instant::now();
     let mut coarsening = [1, 1];
+    let mut convergence = None;
     let (sol, curve, point_solve_s, offset_nm) = match method {
         Method::MinDwell => {
             let s = match coarsen {
@@ -179,6 +187,7 @@ pub fn solve_case(
             let (sol, curve) = md.pick(target).map_err(pe)?;
             // One point's solve: the shared start plus the mean healing of the sweep's points.
             let point = start_s + t1.elapsed().as_secs_f64() / curve.len().max(1) as f64;
+            convergence = Some(md.convergence(&curve));
             let off = sol.trade_off[0].parameter;
             (sol, curve, point, Some(off))
         }
@@ -194,11 +203,24 @@ pub fn solve_case(
         }
     };
     let wall_s = t0.elapsed().as_secs_f64();
+    // A budget may leave the chosen point's residual high, so it asks a converged sweep;
+    // without a target the chosen point itself must be within the convergence limit.
+    let converged = convergence.is_none_or(|c| c.converged);
     let target_met = match target {
         DwellTarget::ResidualRms { nm } => sol.residual_rms_nm <= nm,
-        DwellTarget::MaxDwell { s } => sol.total_dwell_s <= s,
-        DwellTarget::NoOffset => true,
+        DwellTarget::MaxDwell { s } => sol.total_dwell_s <= s && converged,
+        DwellTarget::NoOffset => {
+            convergence.is_none_or(|c| c.converged && sol.residual_rms_nm <= c.limit_nm)
+        }
     };
+    let note = convergence.filter(|c| !c.converged).map(|c| {
+        format!(
+            "min-dwell did not converge: the best residual of its trade-off is {:.4} nm RMS, \
+             above {:.4} nm (the unconstrained inverse filter reaches {:.4} nm with this TIF); \
+             try --method iterative or more --iterations",
+            c.best_residual_rms_nm, c.limit_nm, c.unconstrained_residual_rms_nm
+        )
+    });
     let grid = case.dwell_grid(&cp).map_err(pe)?;
     let feed = realise(&cp.problem, &sol.dwell_s, &case.tif, &grid, &case.limits).map_err(pe)?;
     let (r, c) = cp.problem.dim();
@@ -216,6 +238,8 @@ pub fn solve_case(
         trade_off: curve,
         target,
         target_met,
+        convergence,
+        note,
         offset_nm,
         point_solve_s,
         fft_count: sol.fft_count,

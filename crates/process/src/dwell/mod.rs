@@ -20,6 +20,7 @@
 pub mod case;
 mod coarse;
 pub mod feed;
+pub mod floor;
 pub mod iterative;
 pub mod min_dwell;
 pub mod rifta;
@@ -32,9 +33,10 @@ use crate::fft::{fast_len, Convolver};
 use crate::tif::Tif;
 
 pub use case::DwellCase;
+pub use floor::dwell_floor_s;
 pub use iterative::{solve_iterative, IterativeOptions};
 pub use min_dwell::{
-    auto_coarsening, tif_rms_width_px, DwellTarget, Healer, MinDwell, MinDwellOptions,
+    auto_coarsening, tif_rms_width_px, Convergence, DwellTarget, Healer, MinDwell, MinDwellOptions,
     AUTO_SIGMA_NODES,
 };
 pub use rifta::{solve_rifta, RiftaOptions};
