@@ -344,11 +344,20 @@ fn cli_compare_recipe_runs_writes_the_contract_fields() {
     assert_eq!(d[0]["runs"], serde_json::json!(["A", "B"]));
     for k in [
         "sigma1_difference_nm",
+        "sigma1_difference_sd_nm",
         "cr_rms_difference",
+        "cr_rms_difference_sd",
         "unexplained_share_of_sigma1_difference",
+        "unexplained_share_of_cr_rms_difference",
     ] {
         assert!(d[0][k].as_f64().is_some(), "difference {k}");
     }
+    // The maps' white noise gives the differences a positive SD, and says whether each stands
+    // beyond it.
+    assert!(d[0]["sigma1_difference_sd_nm"].as_f64().unwrap() > 0.0);
+    assert!(d[0]["cr_rms_difference_sd"].as_f64().unwrap() > 0.0);
+    assert!(d[0]["sigma1_difference_beyond_noise"].is_boolean());
+    assert!(d[0]["cr_rms_difference_beyond_noise"].is_boolean());
     let causes = d[0]["causes"].as_array().unwrap();
     let shares: Vec<f64> = causes
         .iter()
@@ -358,7 +367,25 @@ fn cli_compare_recipe_runs_writes_the_contract_fields() {
     for c in causes {
         assert!(c["cause"].is_string() && c["significant"].is_boolean());
         assert!(c["share_of_cr_rms_difference"].is_number());
+        let (s1, cr) = (
+            c["significant_sigma1"].as_bool().unwrap(),
+            c["significant_cr_rms"].as_bool().unwrap(),
+        );
+        assert_eq!(c["significant"].as_bool().unwrap(), s1 || cr);
+        // A share under 5 %, or of a difference within the maps' noise, is never significant.
+        if s1 {
+            assert!(c["share_of_sigma1_difference"].as_f64().unwrap().abs() >= 0.05);
+            assert_eq!(d[0]["sigma1_difference_beyond_noise"], true);
+        }
+        if cr {
+            assert!(c["share_of_cr_rms_difference"].as_f64().unwrap().abs() >= 0.05);
+            assert_eq!(d[0]["cr_rms_difference_beyond_noise"], true);
+        }
     }
+    let html_table = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html_table.contains("significant for σ1 (95 %)"));
+    assert!(html_table.contains("significant for CR (95 %)"));
+    assert!(html_table.contains("run-to-run scatter"));
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("Bonnets: measured vs predicted ripple"));
     assert!(html.contains("Vibration forcing inferred from the measurements"));

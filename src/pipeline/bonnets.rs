@@ -39,9 +39,9 @@ use bonnetlab_surface::{height_stats, remove_terms, Surface, Term};
 use bonnetlab_vibration::coupling::predict::msf_band_rms_y;
 use bonnetlab_vibration::coupling::{CouplingInput, CouplingOptions};
 use bonnetlab_vibration::infer::{
-    attribute_difference, counterfactual_effect, infer_forcing, shared_forcing, vibration_effects,
-    CauseEffect, Difference, ForcingFit, ForcingModel, InferOptions, Predicted, RunEffects,
-    SharedForcing, VibrationForcing,
+    attribute_difference, counterfactual_effect, infer_forcing, shared_forcing,
+    vibration_effects_with_noise, CauseEffect, Difference, ForcingFit, ForcingModel, InferOptions,
+    NoiseDraws, Predicted, RunEffects, SharedForcing, VibrationForcing,
 };
 use bonnetlab_vibration::params::{Bonnet, VibrationParams};
 use ndarray::Array2;
@@ -391,6 +391,12 @@ fn without_unmodelled_effects(
     Surface::with_mask(z, valid, removal.dx_mm, removal.dy_mm)
 }
 
+/// Draws of the maps' white noise behind the attribution's SDs ([`NoiseDraws`]): 16 give an
+/// SD within about 18 % (1 sigma).
+pub const NOISE_DRAWS: usize = 16;
+/// Fixed seed of those draws (the same input gives the same bytes out).
+const NOISE_SEED: u64 = 0x005e_ed0f_a77b;
+
 /// Analyses one run.
 ///
 /// Calibration does not model vibration: given the raw maps it explains the spindle imprint
@@ -588,18 +594,33 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
         },
     };
     let fit = at_recipe_when_unconstrained(fit, &run.params);
+    // The maps' white noise, from the calibration's floor (before - after: both maps' noise in
+    // quadrature), re-drawn to give the SDs it puts on σ1, CR and each cause's effect.
+    let draws = NoiseDraws::new(
+        &before,
+        &after,
+        cal.noise_floor_rms_nm / std::f64::consts::SQRT_2,
+        NOISE_DRAWS,
+        NOISE_SEED,
+        run.pitch_mm,
+        &opts.remove,
+    )
+    .map_err(|e| perr(&e))?;
+    let (sigma1_noise_sd_nm, cr_rms_noise_sd) = draws.value_sd().map_err(|e| perr(&e))?;
     let mut causes =
-        vibration_effects(&model, &fit, &before, &after, &opts.remove).map_err(|e| perr(&e))?;
+        vibration_effects_with_noise(&model, &fit, &before, &after, &opts.remove, Some(&draws))
+            .map_err(|e| perr(&e))?;
     for (e, (kind, added)) in cal.effects.iter().zip(&cal.maps.effect_removal_nm) {
         let (ds, dc) = counterfactual_effect(&before, &after, added, run.pitch_mm, &opts.remove)
             .map_err(|e| perr(&e))?;
+        let (ns, nc) = draws.effect_sd(added).map_err(|e| perr(&e))?;
         let rel = relative_uncertainty(e);
         causes.push(CauseEffect {
             cause: kind.clone(),
             sigma1_nm: ds,
-            sigma1_sd_nm: ds.abs() * rel,
+            sigma1_sd_nm: (ds.abs() * rel).hypot(ns),
             cr_rms: dc,
-            cr_rms_sd: dc.abs() * rel,
+            cr_rms_sd: (dc.abs() * rel).hypot(nc),
         });
     }
     // The removal rate against the recipe's (calibration's baseline rate scale), when no TIF
@@ -627,18 +648,21 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
         } else {
             1.0
         };
+        let (ns, nc) = draws.effect_sd(&added).map_err(|e| perr(&e))?;
         causes.push(CauseEffect {
             cause: "removal_rate".into(),
             sigma1_nm: ds,
-            sigma1_sd_nm: ds.abs() * rel,
+            sigma1_sd_nm: (ds.abs() * rel).hypot(ns),
             cr_rms: dc,
-            cr_rms_sd: dc.abs() * rel,
+            cr_rms_sd: (dc.abs() * rel).hypot(nc),
         });
     }
     let effects = RunEffects {
         name: run.name.clone(),
         sigma1_nm: measured.sigma1_nm,
         cr_rms: measured.cr_rms,
+        sigma1_noise_sd_nm,
+        cr_rms_noise_sd,
         causes,
     };
     Ok(RunAnalysis {

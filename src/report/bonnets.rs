@@ -169,11 +169,25 @@ fn difference_words(d: &Difference, b: &BonnetsComparison) -> Vec<String> {
     } else {
         "higher"
     };
+    let beyond = |b: bool| {
+        if b {
+            "beyond the maps' white noise"
+        } else {
+            "WITHIN the maps' white noise: no cause can be named for it"
+        }
+    };
     out.push(format!(
-        "{nb} leaves a ripple σ1 {:.3} nm {dir} than {na}, and its CR(RMS) differs by {:+.2} \
-         percentage points.",
+        "{nb} leaves a ripple σ1 {:.3} ± {:.3} nm {dir} than {na} ({}), and its CR(RMS) differs \
+         by {:+.2} ± {:.2} percentage points ({}). The ± are 1 standard deviation from the maps' \
+         white noise (each run's calibrated noise floor, re-drawn {} times); \
+         the process's run-to-run scatter is not in them: only repeat runs measure it.",
         d.sigma1_difference_nm.abs(),
-        100.0 * d.cr_rms_difference
+        d.sigma1_difference_sd_nm,
+        beyond(d.sigma1_difference_beyond_noise),
+        100.0 * d.cr_rms_difference,
+        100.0 * d.cr_rms_difference_sd,
+        beyond(d.cr_rms_difference_beyond_noise),
+        crate::pipeline::bonnets::NOISE_DRAWS,
     ));
     let vib: f64 = d
         .causes
@@ -181,21 +195,35 @@ fn difference_words(d: &Difference, b: &BonnetsComparison) -> Vec<String> {
         .filter(|c| VIBRATION_CAUSES.contains(&c.cause.as_str()))
         .map(|c| c.share_of_sigma1_difference)
         .sum();
-    match d.causes.iter().find(|c| c.significant) {
+    match d.causes.iter().find(|c| c.significant_sigma1) {
         Some(c) => out.push(format!(
-            "The largest significant cause is {} with {} of the σ1 difference ({} of the CR \
-             difference); its effect differs between the runs by more than 1.96 standard \
-             deviations (95 % sure). What would change this: {}.",
+            "The largest significant cause of the σ1 difference is {} with {} of it ({} of the \
+             CR difference); its effect differs between the runs by more than 1.96 standard \
+             deviations and by more than the causes leave unexplained (95 % sure, against the \
+             model's uncertainty and the maps' noise). What would change this: {}.",
             c.cause,
             pct(c.share_of_sigma1_difference),
             pct(c.share_of_cr_rms_difference),
             what_would_change(&c.cause)
         )),
         None => out.push(format!(
-            "No cause differs significantly between the runs (95 %): the difference is not \
-             explained with confidence. What would change this: {}.",
+            "No cause of the σ1 difference is significant (95 %): it is not explained with \
+             confidence. What would change this: {}.",
             what_would_change("")
         )),
+    }
+    let cr_only: Vec<&str> = d
+        .causes
+        .iter()
+        .filter(|c| c.significant_cr_rms && !c.significant_sigma1)
+        .map(|c| c.cause.as_str())
+        .collect();
+    if !cr_only.is_empty() {
+        out.push(format!(
+            "Significant for the CR(RMS) difference only: {} (they change the run's RMS, not \
+             its ripple at the pitch).",
+            cr_only.join(", ")
+        ));
     }
     out.push(format!(
         "The vibration mechanisms together account for {} of the σ1 difference at the forcings \
@@ -338,24 +366,36 @@ pub fn section(page: &mut Page, b: &BonnetsComparison) {
             "Difference {} − {}: what accounts for it",
             d.runs[1], d.runs[0]
         ));
+        let yes = |b: bool| if b { "yes" } else { "no" }.to_string();
         let mut t = Table::new([
             "cause",
             "share of σ1 difference",
+            "significant for σ1 (95 %)",
             "share of CR(RMS) difference",
-            "significant (95 %)",
-        ]);
+            "significant for CR (95 %)",
+        ])
+        .caption(
+            "Share = the cause's effect difference (run B − run A; effect = the measured value \
+             less the value with the cause's removal taken back) over the measured difference. \
+             Significant: the difference stands beyond the maps' white noise, the cause's \
+             effect differs by more than 1.96 standard deviations (model uncertainty and map \
+             noise) and by more than the causes leave unexplained, and its share is at least \
+             5 %. Run-to-run scatter of the process is not known without repeat runs.",
+        );
         for c in &d.causes {
             t.row([
                 c.cause.clone(),
                 pct(c.share_of_sigma1_difference),
+                yes(c.significant_sigma1),
                 pct(c.share_of_cr_rms_difference),
-                if c.significant { "yes" } else { "no" }.to_string(),
+                yes(c.significant_cr_rms),
             ]);
         }
         t.row([
             "unexplained".to_string(),
             pct(d.unexplained_share_of_sigma1_difference),
             String::new(),
+            pct(d.unexplained_share_of_cr_rms_difference),
             String::new(),
         ]);
         page.table(&t);

@@ -166,6 +166,8 @@ fn effects(name: &str, f: &Fitted, extra: Vec<CauseEffect>) -> RunEffects {
         name: name.into(),
         sigma1_nm: sigma1,
         cr_rms: cr,
+        sigma1_noise_sd_nm: 0.0,
+        cr_rms_noise_sd: 0.0,
         causes,
     }
 }

@@ -23,8 +23,8 @@ pub mod fit;
 pub mod synth;
 
 pub use attribute::{
-    attribute_difference, counterfactual_effect, vibration_effects, CauseEffect, Difference,
-    DifferenceCause, RunEffects,
+    attribute_difference, counterfactual_effect, vibration_effects, vibration_effects_with_noise,
+    CauseEffect, Difference, DifferenceCause, NoiseDraws, RunEffects,
 };
 pub use fit::{
     end_amplitude_mm, infer_forcing, shared_forcing, ForcingFit, InferOptions, SharedForcing,
