@@ -194,7 +194,16 @@ pub fn render_html_full(
         ripple_section(&mut page, c);
     }
     if let Some(p) = predicted_msf {
-        super::msf_prediction::section(&mut page, p);
+        let measured: Vec<(String, f64)> = c
+            .runs
+            .iter()
+            .filter_map(|r| {
+                r.ripple_after
+                    .as_ref()
+                    .map(|a| (r.name.clone(), a.sigma1_nm))
+            })
+            .collect();
+        super::msf_prediction::section(&mut page, p, &measured);
     }
     if let Some(b) = bonnets {
         super::bonnets::section(&mut page, b);
