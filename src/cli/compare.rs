@@ -82,6 +82,19 @@ pub fn parse(args: &Args) -> Result<(Vec<RunSpec>, Settings), CliError> {
                     code: 2,
                     message: e.to_string(),
                 })?;
+                // A recipe run's ripple is measured at its own raster pitch everywhere in the
+                // report (the bonnets' section reads the recipe): a different --pitch-mm would
+                // put two pitches in one report.
+                if let (Some(given), Some(own)) = (args.pitch_mm, recipe.pitch_mm) {
+                    if (given - own).abs() > 1e-9 * own.abs() {
+                        return Err(CliError::usage(format!(
+                            "{}: [path] pitch_mm = {own} mm, but --pitch-mm {given} was given: a \
+                             recipe run's ripple is measured at its own pitch; leave --pitch-mm \
+                             out",
+                            file.display()
+                        )));
+                    }
+                }
                 recipe_pitch = recipe_pitch.or(recipe.pitch_mm);
                 Ok(RunSpec {
                     name,
