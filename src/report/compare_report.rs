@@ -16,6 +16,7 @@ use super::msf_prediction::PredictedMsf;
 use super::plot::{LinePlot, Series, PALETTE};
 use super::write;
 use crate::pipeline::bonnets::BonnetsComparison;
+use bonnetlab_spectrum::Psd1d;
 
 /// A failure writing the report: the file and what went wrong.
 #[derive(Debug, thiserror::Error)]
@@ -432,6 +433,12 @@ fn ripple_section(page: &mut Page, c: &Comparison) {
     }
 }
 
+/// A PSD's values from its first unbiased bin up (docs/conventions.md: the bins the
+/// detrending biases are left out of band sums and plots).
+fn unbiased(p: &Psd1d, v: &[f64]) -> Vec<f64> {
+    v[p.biased_bins.min(v.len())..].to_vec()
+}
+
 fn psd_plot(c: &Comparison, axis: &str) -> LinePlot {
     let dir = if axis == "x" { "X (scan)" } else { "Y (feed)" };
     let mut plot = LinePlot::new(
@@ -452,8 +459,8 @@ fn psd_plot(c: &Comparison, axis: &str) -> LinePlot {
             plot = plot.series(
                 Series::new(
                     format!("{} before", r.name),
-                    b.freq_per_mm.clone(),
-                    b.psd_nm2_mm.clone(),
+                    unbiased(b, &b.freq_per_mm),
+                    unbiased(b, &b.psd_nm2_mm),
                 )
                 .colour(colour)
                 .dashed(),
@@ -463,8 +470,8 @@ fn psd_plot(c: &Comparison, axis: &str) -> LinePlot {
             plot = plot.series(
                 Series::new(
                     format!("{} after", r.name),
-                    a.freq_per_mm.clone(),
-                    a.psd_nm2_mm.clone(),
+                    unbiased(a, &a.freq_per_mm),
+                    unbiased(a, &a.psd_nm2_mm),
                 )
                 .colour(colour),
             );
@@ -610,5 +617,31 @@ mod tests {
         assert_eq!(file_stem("orig bonnet/1"), "orig_bonnet_1");
         assert_eq!(file_stem(""), "run");
         assert_eq!(file_stem("a-b_c"), "a-b_c");
+    }
+
+    /// The compare report's PSD plots start at the first unbiased bin (they once drew the two
+    /// bins the per-line detrending biases, 0.01 and 0.02 per mm on the demo maps).
+    #[test]
+    fn plotted_psds_leave_out_the_biased_bins() {
+        let p = Psd1d {
+            axis: bonnetlab_spectrum::Axis::Y,
+            freq_per_mm: vec![0.01, 0.02, 0.03, 0.04],
+            psd_nm2_mm: vec![9.0, 8.0, 7.0, 6.0],
+            df_per_mm: 0.01,
+            spacing_mm: 0.25,
+            window: bonnetlab_spectrum::Window::Hann,
+            enbw_bins: 1.5,
+            n_lines: 1,
+            n_segments: 1,
+            biased_bins: 2,
+            removed: vec![],
+        };
+        assert_eq!(unbiased(&p, &p.freq_per_mm), vec![0.03, 0.04]);
+        assert_eq!(unbiased(&p, &p.psd_nm2_mm), vec![7.0, 6.0]);
+        let all = Psd1d {
+            biased_bins: 9,
+            ..p.clone()
+        };
+        assert!(unbiased(&all, &all.freq_per_mm).is_empty());
     }
 }
