@@ -362,3 +362,124 @@ fn rounding_residue_at_the_pitch_is_not_a_ripple() {
     let verdict = rp["verdict"].as_str().unwrap();
     assert!(verdict.contains("rounding residue"), "{verdict}");
 }
+
+/// A CSV map (0.1 mm pixels) of `rows` x `cols` heights h(i, j) nm.
+fn csv_map(path: &Path, rows: usize, cols: usize, h: impl Fn(usize, usize) -> f64) {
+    let mut t = String::from("# dx_mm=0.1 dy_mm=0.1\n");
+    for i in 0..rows {
+        let row: Vec<String> = (0..cols).map(|j| format!("{}", h(i, j))).collect();
+        t.push_str(&row.join(","));
+        t.push('\n');
+    }
+    std::fs::write(path, t).unwrap();
+}
+
+/// A pure sine along Y leaves only rounding residue in X's band at the pitch: the ratio of the
+/// two was 3e31 (reviewer's case); it is null with its reason, and the text says so.
+#[test]
+fn y_over_x_is_absent_when_x_has_only_rounding_residue() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("y_only.csv");
+    csv_map(&f, 600, 400, |i, _| {
+        10.0 * (2.0 * PI * i as f64 * 0.1 / 3.0).sin()
+    });
+    let fs = f.to_str().unwrap();
+    let v = json(&bonnetlab(&["psd", fs, "--pitch-mm", "3", "--json"]));
+    let rp = &v["ripple"];
+    assert_eq!(rp["detected"], Value::Bool(true), "{rp}");
+    assert!(rp["y_over_x"].is_null(), "y_over_x {}", rp["y_over_x"]);
+    let why = rp["y_over_x_reason"].as_str().unwrap_or_default();
+    assert!(why.contains("rounding residue"), "{rp}");
+    assert!(rp.get("hint").is_none(), "{rp}");
+    let out = bonnetlab(&["psd", fs, "--pitch-mm", "3"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("Y/X at f0: absent (no X power at f0"),
+        "{text}"
+    );
+}
+
+/// A ripple at the pitch along X and none along Y: the output hints that X and Y may be
+/// swapped (one line of text, one JSON field); a ripple along Y gives no hint.
+#[test]
+fn ripple_along_x_only_hints_at_swapped_axes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut rng = Rng::new(7);
+    let noise: Vec<f64> = (0..400 * 600).map(|_| 0.5 * rng.normal()).collect();
+    let f = dir.path().join("x_ripple.csv");
+    csv_map(&f, 400, 600, |i, j| {
+        10.0 * (2.0 * PI * j as f64 * 0.1 / 3.0).sin() + noise[i * 600 + j]
+    });
+    let fs = f.to_str().unwrap();
+    let v = json(&bonnetlab(&["psd", fs, "--pitch-mm", "3", "--json"]));
+    let rp = &v["ripple"];
+    assert_eq!(rp["detected"], Value::Bool(false), "{rp}");
+    let hint = rp["hint"]
+        .as_str()
+        .unwrap_or_else(|| panic!("no hint: {rp}"));
+    assert!(hint.contains("swapped"), "{hint}");
+    let out = bonnetlab(&["psd", fs, "--pitch-mm", "3"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        text.lines().filter(|l| l.contains("hint:")).count(),
+        1,
+        "{text}"
+    );
+    // The same map transposed: the ripple is along Y, detected, and no hint.
+    let g = dir.path().join("y_ripple.csv");
+    csv_map(&g, 600, 400, |i, j| {
+        10.0 * (2.0 * PI * i as f64 * 0.1 / 3.0).sin() + noise[j * 600 + i]
+    });
+    let v = json(&bonnetlab(&[
+        "psd",
+        g.to_str().unwrap(),
+        "--pitch-mm",
+        "3",
+        "--json",
+    ]));
+    assert_eq!(v["ripple"]["detected"], Value::Bool(true));
+    assert!(v["ripple"].get("hint").is_none(), "{}", v["ripple"]);
+}
+
+/// `--help` names the CSV's converted column as the file writes it.
+#[test]
+fn help_names_the_csv_columns_the_file_writes() {
+    let out = bonnetlab(&["psd", "--help"]);
+    let help = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        help.contains("gwyddion_w1_nm2_mm") && help.contains("surfacetopography_c1d_nm2_mm"),
+        "{help}"
+    );
+    assert!(!help.contains("converted_nm2_mm"), "{help}");
+}
+
+/// The plot marks only the harmonics at or below Nyquist (5 mm^-1 at 0.1 mm pixels): with a
+/// 0.78 mm pitch 4 f0 = 5.13 mm^-1 lies in the log axis' margin and was drawn there.
+#[test]
+fn plot_marks_no_harmonic_beyond_nyquist() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = ripple_map(dir.path());
+    let svg = dir.path().join("m.svg");
+    let out = bonnetlab(&[
+        "psd",
+        f.to_str().unwrap(),
+        "--pitch-mm",
+        "0.78",
+        "--plot",
+        svg.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let s = std::fs::read_to_string(&svg).unwrap();
+    assert!(
+        s.contains(">3f0<") || s.contains("3f0"),
+        "3 f0 = 3.85 mm^-1 is marked"
+    );
+    assert!(
+        !s.contains("4f0") && !s.contains("5f0"),
+        "a marker beyond Nyquist"
+    );
+}

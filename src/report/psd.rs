@@ -116,9 +116,17 @@ pub fn summary(r: &PsdReport) -> String {
         ));
         line(format!(
             "  Y/X at f0: {}",
-            rp.y_over_x
-                .map_or("n/a (no X power in the band)".into(), |v| format!("{v:.3}"))
+            match (rp.y_over_x, &rp.y_over_x_reason) {
+                (Some(v), _) => format!("{v:.3}"),
+                (None, why) => format!(
+                    "absent ({})",
+                    why.as_deref().unwrap_or("no X power in the band")
+                ),
+            }
         ));
+        if let Some(hint) = &rp.hint {
+            line(format!("  hint: {hint}"));
+        }
         let h: Vec<String> = rp
             .harmonics
             .iter()
@@ -221,8 +229,16 @@ pub fn plot_bytes(
             .dashed(),
         );
     }
+    // Only the harmonics inside the plotted frequencies (up to Nyquist): the log axis' margin
+    // reaches past the last bin, and a marker there would claim a frequency the PSD lacks.
+    let f_max = axis_rows(r)
+        .filter_map(|(_, a)| a.freq_per_mm.last().copied())
+        .fold(0.0, f64::max);
     if let Some(p) = pitch {
-        plot = plot.grating_markers(p, harmonics);
+        let inside = (1..=harmonics)
+            .take_while(|&k| k as f64 / p <= f_max * (1.0 + 1e-12))
+            .count();
+        plot = plot.grating_markers(p, inside);
     }
     if svg {
         plot.to_svg().map(String::into_bytes)

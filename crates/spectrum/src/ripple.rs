@@ -17,7 +17,10 @@
 //!   ripple-free map averaged over
 //!   many lines (>= 64) the prominence of noise is about 1 dB; with very few lines the PSD
 //!   estimate itself fluctuates by several dB, so raise the threshold for those.
-//! - y_over_x = sigma_1 from the Y PSD / band RMS of the X PSD over the same band (anisotropy).
+//! - y_over_x = sigma_1 from the Y PSD / band RMS of the X PSD over the same band (anisotropy);
+//!   null with `y_over_x_reason` when that X band RMS is rounding residue ([`ROUNDING_FLOOR`]).
+//! - `hint`: not detected along Y while X holds a detected ripple at f0 with sigma_1 along X
+//!   >= 3 times Y's: the map's X and Y may be swapped.
 
 use serde::Serialize;
 
@@ -56,10 +59,13 @@ pub struct Harmonic {
     pub sigma_nm: f64,
 }
 
-/// Ripple metrics (field names as in shared/spec/interfaces.md `ripple`).
-/// sigma_1 at or below this fraction of the Y profile's RMS is rounding residue, never a
-/// detected ripple (f64 arithmetic leaves ~1e-16 of the RMS in every bin).
+/// A band RMS at or below this fraction of the larger of the X and Y profiles' RMS is rounding
+/// residue (f64 arithmetic leaves ~1e-16 of the RMS in every bin): never a detected ripple
+/// along Y, never the denominator of `y_over_x` along X. One floor, `floor_nm` in
+/// [`ripple_from_psds`], for both.
 pub const ROUNDING_FLOOR: f64 = 1e-10;
+
+/// Ripple metrics (field names as in shared/spec/interfaces.md `ripple`).
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Ripple {
@@ -76,8 +82,11 @@ pub struct Ripple {
     pub background_nm2_mm: f64,
     pub prominence_threshold_db: f64,
     pub detected: bool,
-    /// sigma_1 (Y) / band RMS of the X PSD over the same band; null when X has no power there.
+    /// sigma_1 (Y) / band RMS of the X PSD over the same band; null when X has no power there
+    /// (its band RMS is rounding residue), with `y_over_x_reason` beside it.
     pub y_over_x: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub y_over_x_reason: Option<String>,
     pub sigma1_x_nm: f64,
     /// The f0 band reaches into the biased lowest bins. Always false in a returned value:
     /// such a ripple is `NotResolvable` (kept for the JSON contract's readers).
@@ -85,6 +94,9 @@ pub struct Ripple {
     /// Why `detected` is what it is, in words (prominence against the threshold).
     pub verdict: String,
     pub harmonics: Vec<Harmonic>,
+    /// Not detected along Y but a ripple at the pitch along X: the axes may be swapped.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hint: Option<String>,
 }
 
 /// Ripple from an existing pair of one-sided PSDs (X and Y).
@@ -157,54 +169,24 @@ pub fn ripple_from_psds(
         .sum::<f64>()
         .sqrt();
 
-    let peak = y
-        .freq_per_mm
-        .iter()
-        .zip(&y.psd_nm2_mm)
-        .filter(|(f, _)| in_band(**f, f0))
-        .map(|(_, p)| *p)
-        .fold(0.0, f64::max);
-    let flank = (2.0 * h).max(8.0 * df);
-    let mut bg: Vec<f64> = y
-        .freq_per_mm
-        .iter()
-        .zip(&y.psd_nm2_mm)
-        .filter(|(f, _)| {
-            let d = (**f - f0).abs();
-            d > h + eps
-                && d <= h + flank + eps
-                && **f >= f_lo - eps
-                && !(2..=ropts.harmonics.max(2)).any(|k| in_band(**f, k as f64 * f0))
-        })
-        .map(|(_, p)| *p)
-        .collect();
-    if bg.is_empty() {
-        return Err(SpectrumError::TooSmall(format!(
-            "no PSD bins flank the grating band around {f0} mm^-1 to estimate a background"
-        )));
-    }
-    bg.sort_by(f64::total_cmp);
-    let mid = bg.len() / 2;
-    let background = if bg.len() % 2 == 1 {
-        bg[mid]
-    } else {
-        0.5 * (bg[mid - 1] + bg[mid])
-    };
-    let prominence_db = if background > 0.0 && peak > 0.0 {
-        10.0 * (peak / background).log10()
-    } else if peak > 0.0 {
-        f64::MAX.log10() * 10.0 // a peak over an exactly zero background (noise-free data)
-    } else {
-        0.0
-    };
+    let n_harm = ropts.harmonics.max(2);
+    let (peak, background, prominence_db) =
+        prominence(y, f0, h, n_harm, f_lo).ok_or_else(|| {
+            SpectrumError::TooSmall(format!(
+                "no PSD bins flank the grating band around {f0} mm^-1 to estimate a background"
+            ))
+        })?;
     let sigma1_x = band_rms(x, f0 - h, f0 + h);
     // A peak is a ripple only above the arithmetic's own floor: a map with nothing along Y
     // still leaves rounding residue of ~1e-16 of its RMS in every bin, and a ratio of two such
     // residues can be any number of dB.
-    let y_rms = y.psd_nm2_mm.iter().map(|p| p * df).sum::<f64>().sqrt();
-    let above_rounding = sigma1 > ROUNDING_FLOOR * y_rms;
-    let detected = above_rounding && prominence_db >= ropts.prominence_threshold_db;
-    let verdict = if above_rounding {
+    // The floor is relative to the larger of the two profiles' RMS: a map with nothing along
+    // one direction has residue for that profile's whole RMS too.
+    let (x_rms, y_rms) = (profile_rms_nm(x), profile_rms_nm(y));
+    let floor_nm = ROUNDING_FLOOR * x_rms.max(y_rms);
+    let y_above = sigma1 > floor_nm;
+    let detected = y_above && prominence_db >= ropts.prominence_threshold_db;
+    let verdict = if y_above {
         format!(
             "{}: prominence {:.1} dB {} the {} dB threshold",
             if detected { "detected" } else { "not detected" },
@@ -215,9 +197,30 @@ pub fn ripple_from_psds(
     } else {
         format!(
             "not detected: sigma_1 {sigma1:.3e} nm is rounding residue (under {ROUNDING_FLOOR:e} of \
-             the Y profile's RMS, {y_rms:.3e} nm)"
+             the larger profile RMS, {:.3e} nm)",
+            x_rms.max(y_rms)
         )
     };
+    // The ratio needs an X band above X's own rounding residue: a map with nothing along X
+    // leaves ~1e-16 of its RMS there, and sigma_1 over that is a meaningless 1e30.
+    let (y_over_x, y_over_x_reason) = if sigma1_x > floor_nm {
+        (Some(sigma1 / sigma1_x), None)
+    } else {
+        (
+            None,
+            Some(format!(
+                "no X power at f0: the X band RMS {sigma1_x:.3e} nm is rounding residue (under \
+                 {floor_nm:.3e} nm, {ROUNDING_FLOOR:e} of the larger profile RMS)"
+            )),
+        )
+    };
+    let hint =
+        (!detected && x_ripple_detected(x, f0, sigma1, sigma1_x, floor_nm, ropts)).then(|| {
+            format!(
+                "a ripple at the pitch is along X (sigma_1 along X {sigma1_x:.3e} nm, along Y \
+             {sigma1:.3e} nm): are X (scan, along columns) and Y (feed, along rows) swapped?"
+            )
+        });
     Ok(Ripple {
         pitch_mm,
         f0_per_mm: f0,
@@ -231,12 +234,98 @@ pub fn ripple_from_psds(
         background_nm2_mm: background,
         prominence_threshold_db: ropts.prominence_threshold_db,
         detected,
-        y_over_x: (sigma1_x > 0.0).then(|| sigma1 / sigma1_x),
+        y_over_x,
+        y_over_x_reason,
         sigma1_x_nm: sigma1_x,
         biased: false,
         verdict,
         harmonics,
+        hint,
     })
+}
+
+/// RMS (nm) of a profile from its one-sided PSD: sqrt(sum P1 df) over every bin.
+fn profile_rms_nm(p: &Psd1d) -> f64 {
+    p.psd_nm2_mm
+        .iter()
+        .map(|v| v * p.df_per_mm)
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// sigma_1 along X at least this many times sigma_1 along Y, with a detected peak along X,
+/// suggests the map's axes are swapped.
+const SWAP_HINT_RATIO: f64 = 3.0;
+
+/// Whether the X PSD holds a ripple at f0 by the same test as Y (above rounding, prominence
+/// over the flanks >= threshold, each in X's own band width) and well above Y's sigma_1.
+fn x_ripple_detected(
+    x: &Psd1d,
+    f0: f64,
+    sigma1_y: f64,
+    sigma1_x: f64,
+    floor_nm: f64,
+    ropts: &RippleOptions,
+) -> bool {
+    let nyq = x.freq_per_mm.last().copied().unwrap_or(0.0);
+    let h = (4.0 * x.df_per_mm).max(0.1 * f0);
+    let f_lo = x.first_unbiased_freq_per_mm();
+    if f0 > nyq || f0 - h < f_lo - 1e-9 * x.df_per_mm {
+        return false;
+    }
+    let sigma_x = band_rms(x, f0 - h, f0 + h);
+    sigma_x > floor_nm
+        && sigma1_x >= SWAP_HINT_RATIO * sigma1_y
+        && prominence(x, f0, h, ropts.harmonics.max(2), f_lo)
+            .is_some_and(|(_, _, db)| db >= ropts.prominence_threshold_db)
+}
+
+/// (peak, background, prominence dB) of a PSD at f0: peak = largest value in |f - f0| <= h,
+/// background = median over the flanks h < |f - f0| <= h + max(2h, 8 df) above `f_lo`, leaving
+/// out the harmonic bands 2..=n_harm; None when no bin flanks the band.
+fn prominence(p: &Psd1d, f0: f64, h: f64, n_harm: usize, f_lo: f64) -> Option<(f64, f64, f64)> {
+    let df = p.df_per_mm;
+    let eps = 1e-9 * df;
+    let in_band = |f: f64, c: f64| (f - c).abs() <= h + eps;
+    let peak = p
+        .freq_per_mm
+        .iter()
+        .zip(&p.psd_nm2_mm)
+        .filter(|(f, _)| in_band(**f, f0))
+        .map(|(_, v)| *v)
+        .fold(0.0, f64::max);
+    let flank = (2.0 * h).max(8.0 * df);
+    let mut bg: Vec<f64> = p
+        .freq_per_mm
+        .iter()
+        .zip(&p.psd_nm2_mm)
+        .filter(|(f, _)| {
+            let d = (**f - f0).abs();
+            d > h + eps
+                && d <= h + flank + eps
+                && **f >= f_lo - eps
+                && !(2..=n_harm).any(|k| in_band(**f, k as f64 * f0))
+        })
+        .map(|(_, v)| *v)
+        .collect();
+    if bg.is_empty() {
+        return None;
+    }
+    bg.sort_by(f64::total_cmp);
+    let mid = bg.len() / 2;
+    let background = if bg.len() % 2 == 1 {
+        bg[mid]
+    } else {
+        0.5 * (bg[mid - 1] + bg[mid])
+    };
+    let db = if background > 0.0 && peak > 0.0 {
+        10.0 * (peak / background).log10()
+    } else if peak > 0.0 {
+        f64::MAX.log10() * 10.0 // a peak over an exactly zero background (noise-free data)
+    } else {
+        0.0
+    };
+    Some((peak, background, db))
 }
 
 /// Ripple of a map: both PSDs (one form removal) then `ripple_from_psds` with default options.
