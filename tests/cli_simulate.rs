@@ -175,3 +175,36 @@ fn simulate_writes_maps_json_and_plots() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.toml") && err.contains("dwell_s"), "{err}");
 }
+
+/// A flat before map has no convergence ratio: `cr_rms` / `cr_pv` are null with `cr_reason`
+/// beside them (they were 0.0, printed "CR 0.0 %"), and the summary line says undefined.
+#[test]
+fn flat_before_map_has_no_convergence_ratio() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let s = Surface::new(Array2::from_elem((80, 100), 5.0), Some(0.25), Some(0.25)).unwrap();
+    write_surface(&d.join("before.dat"), &s, MapFormat::MetroProDat).unwrap();
+    let mut spec = RasterSpec::over_rect((-6.0, 31.0), (-6.0, 26.0), 2.0, 4.0);
+    spec.sample_dt_s = 0.2;
+    std::fs::write(d.join("path.csv"), path_to_csv(&spec.generate().unwrap())).unwrap();
+    std::fs::write(
+        d.join("recipe.toml"),
+        "[measurement]\nbefore = \"before.dat\"\n[tif]\nmodel = { kind = \"gaussian\", sigma_mm = 1.0, \
+         peak_rate_nm_per_s = 10.0, diameter_mm = 8.0 }\n[path]\nlog = \"path.csv\"\npitch_mm = 2.0\n",
+    )
+    .unwrap();
+    let out = d.join("out");
+    let o = simulate(&d.join("recipe.toml"), &out, &["--no-vibration"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("simulation.json")).unwrap()).unwrap();
+    assert!(v["cr_rms"].is_null() && v["cr_pv"].is_null(), "{v}");
+    let why = v["cr_reason"].as_str().unwrap_or_default();
+    assert!(why.contains("flat") && why.contains("undefined"), "{v}");
+    assert!(v["rms_after_nm"].as_f64().is_some_and(|r| r > 0.0));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("CR undefined") && !stdout.contains("CR 0.0 %"),
+        "{stdout}"
+    );
+}

@@ -23,11 +23,12 @@ use std::path::Path;
 
 use bonnetlab_process::recipe::{Recipe, TifSource};
 use bonnetlab_process::simulate::{predict, Mode, Prediction, ToolModel};
-use bonnetlab_process::{read_path_csv, Grid, ProcessError};
+use bonnetlab_process::{Grid, ProcessError};
 use bonnetlab_spectrum::{
-    band_rms, psd_xy, ripple_from_psds, Psd1d, PsdOptions, Ripple, RippleOptions,
+    band_rms, psd_xy, ripple_from_psds, Psd1d, PsdOptions, Ripple, RippleOptions, SpectrumError,
     MSF_DEFAULT_PER_MM,
 };
+use bonnetlab_surface::convergence::{convergence_ratio, undefined_convergence_reason};
 use bonnetlab_surface::{height_stats, remove_terms, Surface, Term};
 use bonnetlab_vibration::coupling::predict::default_sweep_rpm;
 use bonnetlab_vibration::coupling::{self, CouplingInput, CouplingOptions, SweepRow};
@@ -90,8 +91,11 @@ pub struct SimulationReport {
     pub pv_before_nm: f64,
     pub rms_after_nm: f64,
     pub pv_after_nm: f64,
-    pub cr_rms: f64,
-    pub cr_pv: f64,
+    /// (before - after) / before; null for a flat before map, with `cr_reason` beside it.
+    pub cr_rms: Option<f64>,
+    pub cr_pv: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cr_reason: Option<String>,
     pub removal_mean_nm: f64,
     pub removal_rms_nm: f64,
     pub path_duration_s: f64,
@@ -213,7 +217,9 @@ pub fn simulate(
     )
     .map_err(|e| perr(&spot_file, e))?;
     step("path");
-    let path = read_path_csv(&recipe.path_log).map_err(|e| perr(&recipe.path_log, e))?;
+    let path = recipe
+        .read_path_log()
+        .map_err(|e| perr(&recipe.path_log, e))?;
     check_pitch(recipe_file, &recipe, grid.dy_mm)?;
     bonnetlab_process::path::log::check_run_extent(
         &path,
@@ -299,9 +305,10 @@ pub fn simulate(
     let (_, py_b) = psd_xy(&before, &opts).map_err(serr)?;
     let (_, py_r) = psd_xy(&prediction.removal, &opts).map_err(serr)?;
     let ripple = match recipe.pitch_mm {
-        Some(p) => {
-            Some(ripple_from_psds(&px_a, &py_a, p, &RippleOptions::default()).map_err(serr)?)
-        }
+        Some(p) => Some(
+            ripple_from_psds(&px_a, &py_a, p, &RippleOptions::default())
+                .map_err(|e| pitch_error(recipe_file, &recipe, p, e))?,
+        ),
         None => None,
     };
     let (f1, f2) = MSF_DEFAULT_PER_MM;
@@ -346,6 +353,7 @@ pub fn simulate(
         notes.push(why.clone());
     }
     let t = tool.sampled();
+    let cr_reason = undefined_convergence_reason(rms_b, pv_b, &terms);
     let report = SimulationReport {
         recipe: recipe_file.display().to_string(),
         mode: if exact && vib.is_none() {
@@ -360,16 +368,9 @@ pub fn simulate(
         pv_before_nm: pv_b,
         rms_after_nm: rms_a,
         pv_after_nm: pv_a,
-        cr_rms: if rms_b > 0.0 {
-            (rms_b - rms_a) / rms_b
-        } else {
-            0.0
-        },
-        cr_pv: if pv_b > 0.0 {
-            (pv_b - pv_a) / pv_b
-        } else {
-            0.0
-        },
+        cr_rms: cr_reason.is_none().then(|| convergence_ratio(rms_b, rms_a)),
+        cr_pv: cr_reason.is_none().then(|| convergence_ratio(pv_b, pv_a)),
+        cr_reason,
         removal_mean_nm: removal_stats.mean_nm,
         removal_rms_nm: removal_stats.rms_nm,
         path_duration_s: path.duration_s(),
@@ -413,6 +414,23 @@ fn check_pitch(recipe_file: &Path, recipe: &Recipe, dy_mm: f64) -> Result<(), Er
             ),
         )),
         _ => Ok(()),
+    }
+}
+
+/// A pitch the map cannot resolve (longer than the Y field, or so few periods on it that the
+/// band reaches the biased lowest PSD bins: the ripple's own test) is the recipe's error,
+/// named by its key (exit 2); any other failure of the ripple is the map's (exit 1).
+fn pitch_error(recipe_file: &Path, recipe: &Recipe, pitch_mm: f64, e: SpectrumError) -> Error {
+    match e {
+        SpectrumError::NotResolvable(_) => Error::input(
+            recipe_file,
+            format!(
+                "[path] pitch_mm: {} mm on {}: {e}",
+                bonnetlab_surface::format::sig(pitch_mm, 4),
+                recipe.before.display()
+            ),
+        ),
+        e => Error::processing(&recipe.before, e),
     }
 }
 

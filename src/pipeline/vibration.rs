@@ -132,7 +132,11 @@ pub fn response(
         Bonnet::ALL.to_vec()
     } else {
         let b = choice.parse::<Bonnet>().map_err(|e| match bonnet {
-            Some(_) => Error::usage(format!("--bonnet: {e}")),
+            // The command line also takes `both`, which a recipe's [process] bonnet does not.
+            Some(b) => Error::usage(format!(
+                "--bonnet: unknown bonnet '{}' (expected original, suppression or both)",
+                b.trim()
+            )),
             None => Error::input(&name, format!("[process] bonnet: {e}")),
         })?;
         vec![b]
@@ -188,7 +192,8 @@ impl Vibration {
             return Ok(Vec::new());
         };
         let file = recipe.parent().unwrap_or(Path::new(".")).join(log);
-        let path = bonnetlab_process::read_path_csv(&file).map_err(|e| Error::input(&file, e))?;
+        let path = bonnetlab_process::recipe::read_named_path_log(&file, recipe)
+            .map_err(|e| Error::input(&file, e))?;
         let n = path
             .t_s
             .iter()

@@ -73,13 +73,14 @@ pub fn summary(out: &Path, r: &SimulationReport) -> String {
         _ => String::new(),
     };
     format!(
-        "simulate: wrote {} ({}, {} bonnet): RMS {} -> {} nm predicted (CR {} %, piston and tilt removed){ripple}{sweep}",
+        "simulate: wrote {} ({}, {} bonnet): RMS {} -> {} nm predicted (CR {}, piston and tilt removed){ripple}{sweep}",
         out.join("simulation.json").display(),
         r.mode,
         r.bonnet,
         fixed(r.rms_before_nm, 3),
         fixed(r.rms_after_nm, 3),
-        fixed(100.0 * r.cr_rms, 1),
+        r.cr_rms
+            .map_or("undefined: flat before map".into(), |c| fixed(100.0 * c, 1) + " %"),
     )
 }
 

@@ -216,7 +216,13 @@ impl Ctx<'_> {
 
     fn positive(&self, v: Option<f64>, key: &str) -> Result<Option<f64>, ProcessError> {
         match self.finite(v, key)? {
-            Some(x) if x <= 0.0 => Err(self.err(key, format!("must be positive, got {x}"))),
+            Some(x) if x <= 0.0 => Err(self.err(
+                key,
+                format!(
+                    "must be positive, got {}",
+                    bonnetlab_surface::format::sig(x, 6)
+                ),
+            )),
             other => Ok(other),
         }
     }
@@ -243,6 +249,29 @@ impl Ctx<'_> {
 /// before in run.toml)"`.
 pub fn named_by(recipe_file: &Path, key: &str) -> String {
     format!(" (named by {key} in {})", recipe_file.display())
+}
+
+/// Reads the path log a recipe names (`[path] log`): an error about it (missing, unreadable, a
+/// bad line) ends with [`named_by`], as the maps' errors do.
+pub fn read_named_path_log(log: &Path, recipe_file: &Path) -> Result<crate::PathLog, ProcessError> {
+    crate::path::read_path_csv(log).map_err(|e| traced(e, recipe_file, "[path] log"))
+}
+
+/// An error about a file a recipe names, with [`named_by`] appended to what it says.
+pub fn traced(e: ProcessError, recipe_file: &Path, key: &str) -> ProcessError {
+    let by = named_by(recipe_file, key);
+    match e {
+        ProcessError::Io { file, what } => ProcessError::Io {
+            file,
+            what: what + &by,
+        },
+        ProcessError::PathLog { file, line, what } => ProcessError::PathLog {
+            file,
+            line,
+            what: what + &by,
+        },
+        other => other,
+    }
 }
 
 /// Checks that a run's two maps record a removal: maps whose valid pixels coincide and hold
@@ -272,6 +301,11 @@ pub fn check_measured_removal(
 }
 
 impl Recipe {
+    /// Reads the path log this recipe names; errors say so ([`read_named_path_log`]).
+    pub fn read_path_log(&self) -> Result<crate::PathLog, ProcessError> {
+        read_named_path_log(&self.path_log, &self.file)
+    }
+
     /// Reads and validates a recipe file.
     pub fn load(path: &Path) -> Result<Recipe, ProcessError> {
         Recipe::parse(&read_recipe_text(path)?, path)

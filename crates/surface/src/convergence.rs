@@ -25,6 +25,30 @@ pub fn convergence_ratio(q_before: f64, q_after: f64) -> f64 {
     (q_before - q_after) / q_before
 }
 
+/// Why the convergence ratio of a before map is undefined, or None when it is defined:
+/// CR = (before - after) / before needs a before map that is not flat (RMS and PV > 0) after
+/// removing `removed`. The one statement of that rule and its words, for every command that
+/// reports a CR.
+pub fn undefined_convergence_reason(
+    rms_before_nm: f64,
+    pv_before_nm: f64,
+    removed: &[Term],
+) -> Option<String> {
+    (!(rms_before_nm > 0.0 && pv_before_nm > 0.0 && rms_before_nm.is_finite())).then(|| {
+        let terms: Vec<&str> = removed.iter().map(|t| t.name()).collect();
+        format!(
+            "the before map is flat after removing {} (RMS {} nm): the convergence ratio \
+             (before - after) / before is undefined",
+            if terms.is_empty() {
+                "nothing".to_string()
+            } else {
+                terms.join(", ")
+            },
+            crate::format::sig(rms_before_nm, 4)
+        )
+    })
+}
+
 /// (cr_b - cr_a) / cr_a: the relative improvement of run b over run a.
 pub fn improvement(cr_a: f64, cr_b: f64) -> f64 {
     (cr_b - cr_a) / cr_a
