@@ -113,7 +113,8 @@ pub struct Args {
     /// Print one JSON object instead of a summary.
     #[arg(long)]
     pub json: bool,
-    /// Write the spectra as CSV (axis,freq_per_mm,psd_nm2_mm[,q_rad_per_mm,converted_nm2_mm]).
+    /// Write the spectra as CSV (axis,freq_per_mm,psd_nm2_mm; with --convention also
+    /// q_rad_per_mm and gwyddion_w1_nm2_mm or surfacetopography_c1d_nm2_mm).
     #[arg(long, value_name = "OUT")]
     pub csv: Option<PathBuf>,
     /// Draw the PSDs log-log (X and Y, grating frequency and harmonics marked): .png or .svg.

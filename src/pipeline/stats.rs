@@ -62,7 +62,11 @@ pub fn difference_of(
         (None, None) => true,
         _ => false,
     };
-    let mm = |v: Option<f64>| v.map_or("unknown".to_string(), |v| format!("{v} mm"));
+    let mm = |v: Option<f64>| {
+        v.map_or("unknown".to_string(), |v| {
+            format!("{} mm", bonnetlab_surface::format::sig(v, 7))
+        })
+    };
     if s.dim() != m.dim() || !same_pixel(s.dx_mm, m.dx_mm) || !same_pixel(s.dy_mm, m.dy_mm) {
         return Err(Error::input(
             minus_file,

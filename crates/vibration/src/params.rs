@@ -153,6 +153,10 @@ pub struct VibrationParams {
 /// Default natural frequency used to derive the equivalent mass (measured mode 4).
 pub const DEFAULT_NATURAL_FREQ_HZ: f64 = 20.0;
 
+/// Natural frequencies (Hz) a robot-and-bonnet model may have: the robot's measured modes are
+/// 4.75 to 23.8 Hz; four decades either side is generous and still rejects unit slips.
+pub const NATURAL_FREQ_RANGE_HZ: (f64, f64) = (0.01, 1.0e5);
+
 impl Default for VibrationParams {
     fn default() -> Self {
         let (k1, k2): (f64, f64) = (1476.0, 328.9);
@@ -306,6 +310,21 @@ impl VibrationParams {
         tif_radius_mm: Option<f64>,
     ) -> Result<Self, VibrationError> {
         let d = VibrationParams::default();
+        // One spindle speed per run: a [vibration] value that differs from [process]'s would
+        // silently model another run than the one the recipe describes.
+        if let (Some(vr), Some(pr)) = (v.spindle_rpm, process_spindle_rpm) {
+            if vr != pr {
+                return Err(VibrationError::param(
+                    "spindle_rpm",
+                    format!(
+                        "{} rpm differs from [process] spindle_rpm = {} rpm: give one of them, \
+                         or the same value in both",
+                        bonnetlab_surface::format::sig(vr, 6),
+                        bonnetlab_surface::format::sig(pr, 6)
+                    ),
+                ));
+            }
+        }
         let (k1, k2, theta, norm) = match v.kfd_n_per_mm {
             Some(m) => {
                 for (k, given) in [
@@ -421,6 +440,7 @@ impl VibrationParams {
         positive("k2_n_per_mm", self.k2_n_per_mm)?;
         finite_in("theta_deg", self.theta_deg, -90.0, 90.0)?;
         positive("mass_kg", self.mass_kg)?;
+        self.check_natural_freqs()?;
         for (key, z) in [("zeta1", self.zeta1), ("zeta2", self.zeta2)] {
             if !(z.is_finite() && z > 0.0 && z <= 1.0) {
                 return Err(VibrationError::param(
@@ -460,6 +480,42 @@ impl VibrationParams {
         positive("inner_pressure_mpa", self.inner_pressure_mpa)?;
         finite_in("pressure_exponent", self.pressure_exponent, 0.0, 5.0)?;
         Ok(())
+    }
+
+    /// The natural frequencies sqrt(k_i / m) / 2 pi must lie in [`NATURAL_FREQ_RANGE_HZ`]: a
+    /// mass or stiffness outside that is a typo or a unit slip (1e-300 kg gives 1.9e152 Hz).
+    /// Names the key that moved them: the mass (`mass_kg` or `natural_freq_hz`) when the
+    /// stiffest direction is out, else the softest stiffness.
+    fn check_natural_freqs(&self) -> Result<(), VibrationError> {
+        let (lo, hi) = NATURAL_FREQ_RANGE_HZ;
+        let f = self.natural_freq_hz();
+        let inside = |v: f64| v.is_finite() && (lo..=hi).contains(&v);
+        if inside(f[0]) && inside(f[1]) {
+            return Ok(());
+        }
+        let key = if !inside(f[0]) {
+            match self.mass_source {
+                MassSource::Given => "mass_kg",
+                MassSource::NaturalFreqHz(_) => "natural_freq_hz",
+            }
+        } else {
+            "k2_n_per_mm"
+        };
+        let sig = |v: f64| bonnetlab_surface::format::sig(v, 4);
+        Err(VibrationError::param(
+            key,
+            format!(
+                "mass {} kg with k1 {} and k2 {} N/mm gives natural frequencies {} and {} Hz, \
+                 outside {} Hz to {} Hz: not a polishing robot's",
+                sig(self.mass_kg),
+                sig(self.k1_n_per_mm),
+                sig(self.k2_n_per_mm),
+                sig(f[0]),
+                sig(f[1]),
+                sig(lo),
+                sig(hi)
+            ),
+        ))
     }
 
     /// Principal axis unit vectors (e1, e2) in the (t, n) frame.
@@ -568,7 +624,10 @@ fn positive(key: &str, v: f64) -> Result<(), VibrationError> {
     } else {
         Err(VibrationError::param(
             key,
-            format!("must be a positive finite number, found {v}"),
+            format!(
+                "must be a positive finite number, found {}",
+                bonnetlab_surface::format::sig(v, 6)
+            ),
         ))
     }
 }
@@ -579,7 +638,12 @@ fn finite_in(key: &str, v: f64, lo: f64, hi: f64) -> Result<(), VibrationError> 
     } else {
         Err(VibrationError::param(
             key,
-            format!("must be within [{lo}, {hi}], found {v}"),
+            format!(
+                "must be within [{}, {}], found {}",
+                bonnetlab_surface::format::sig(lo, 6),
+                bonnetlab_surface::format::sig(hi, 6),
+                bonnetlab_surface::format::sig(v, 6)
+            ),
         ))
     }
 }

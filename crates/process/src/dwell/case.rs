@@ -84,12 +84,17 @@ fn check_extent_mm(
     pixel_mm: f64,
 ) -> Result<(), String> {
     let Some([a, b]) = mm else { return Ok(()) };
+    let sig = bonnetlab_surface::format::sig;
     let want = [start as f64 * pixel_mm, (end - 1) as f64 * pixel_mm];
     if (a - want[0]).abs() > 0.5 * pixel_mm || (b - want[1]).abs() > 0.5 * pixel_mm {
         return Err(format!(
-            "[{a}, {b}] mm disagrees with pixels [{start}, {end}) at {pixel_mm} mm, whose first \
-             and last centres are [{}, {}] mm",
-            want[0], want[1]
+            "[{}, {}] mm disagrees with pixels [{start}, {end}) at {} mm, whose first and last \
+             centres are [{}, {}] mm",
+            sig(a, 7),
+            sig(b, 7),
+            sig(pixel_mm, 7),
+            sig(want[0], 7),
+            sig(want[1], 7)
         ));
     }
     Ok(())
@@ -236,11 +241,12 @@ impl DwellCase {
             if let Some(d) = d {
                 if (d - self.pixel_mm).abs() > PIXEL_TOLERANCE * self.pixel_mm {
                     return Err(ProcessError::invalid(format!(
-                        "{}: pixel_mm = {} but the map {} carries {d} mm along {axis}; give the \
+                        "{}: pixel_mm = {} but the map {} carries {} mm along {axis}; give the \
                          map's pixel size",
                         self.file.display(),
-                        self.pixel_mm,
-                        self.surface.display()
+                        bonnetlab_surface::format::sig(self.pixel_mm, 7),
+                        self.surface.display(),
+                        bonnetlab_surface::format::sig(d, 7)
                     )));
                 }
             }
