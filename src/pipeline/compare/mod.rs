@@ -24,6 +24,7 @@
 
 use std::path::{Path, PathBuf};
 
+use bonnetlab_surface::format::sig;
 use ndarray::{Array2, Zip};
 use rayon::prelude::*;
 
@@ -255,8 +256,12 @@ fn analyse_run(
             return Err(CompareError::input(
                 p,
                 format!(
-                    "pixel size {sx} x {sy} mm differs from {}'s {dx} x {dy} mm",
-                    paths[0].display()
+                    "pixel size {} x {} mm differs from {}'s {} x {} mm",
+                    sig(sx, 7),
+                    sig(sy, 7),
+                    paths[0].display(),
+                    sig(dx, 7),
+                    sig(dy, 7),
                 ),
             ));
         }
@@ -299,21 +304,14 @@ fn analyse_run(
     // CR = (before - after) / before is undefined for a flat before map: bad input, named,
     // never a silent null in report.json.
     for (m, &p) in mb.iter().zip(&paths) {
-        if !(m.rms_nm > 0.0 && m.pv_nm > 0.0) {
+        if let Some(why) = bonnetlab_surface::convergence::undefined_convergence_reason(
+            m.rms_nm,
+            m.pv_nm,
+            &settings.remove,
+        ) {
             return Err(CompareError::input(
                 p,
-                format!(
-                    "run '{}': the before map is flat after removing {} (RMS {} nm): the \
-                     convergence ratio (before - after) / before is undefined",
-                    spec.name,
-                    settings
-                        .remove
-                        .iter()
-                        .map(|t| t.name())
-                        .collect::<Vec<_>>()
-                        .join(", "),
-                    bonnetlab_surface::format::sig(m.rms_nm, 4)
-                ),
+                format!("run '{}': {why}", spec.name),
             ));
         }
     }
