@@ -39,9 +39,9 @@ use bonnetlab_surface::{height_stats, remove_terms, Surface, Term};
 use bonnetlab_vibration::coupling::predict::msf_band_rms_y;
 use bonnetlab_vibration::coupling::{CouplingInput, CouplingOptions};
 use bonnetlab_vibration::infer::{
-    attribute_difference, counterfactual_effect, infer_forcing, shared_forcing,
-    vibration_effects_with_noise, CauseEffect, Difference, ForcingFit, ForcingModel, InferOptions,
-    NoiseDraws, Predicted, RunEffects, SharedForcing, VibrationForcing,
+    attribute_difference, infer_forcing, shared_forcing, vibration_effects_with_noise, Difference,
+    ForcingFit, ForcingModel, InferOptions, NoiseDraws, Predicted, RunEffects, SharedForcing,
+    VibrationForcing,
 };
 use bonnetlab_vibration::params::{Bonnet, VibrationParams};
 use ndarray::Array2;
@@ -611,17 +611,8 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
         vibration_effects_with_noise(&model, &fit, &before, &after, &opts.remove, Some(&draws))
             .map_err(|e| perr(&e))?;
     for (e, (kind, added)) in cal.effects.iter().zip(&cal.maps.effect_removal_nm) {
-        let (ds, dc) = counterfactual_effect(&before, &after, added, run.pitch_mm, &opts.remove)
-            .map_err(|e| perr(&e))?;
-        let (ns, nc) = draws.effect_sd(added).map_err(|e| perr(&e))?;
-        let rel = relative_uncertainty(e);
-        causes.push(CauseEffect {
-            cause: kind.clone(),
-            sigma1_nm: ds,
-            sigma1_sd_nm: (ds.abs() * rel).hypot(ns),
-            cr_rms: dc,
-            cr_rms_sd: (dc.abs() * rel).hypot(nc),
-        });
+        let cause = draws.cause_effect(kind, added, relative_uncertainty(e));
+        causes.push(cause.map_err(|e| perr(&e))?);
     }
     // The removal rate against the recipe's (calibration's baseline rate scale), when no TIF
     // scale was accepted: with piston removed, a wider spot and a lower rate leave the same
@@ -630,8 +621,6 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
         let c = cal.baseline.rate_scale;
         let base = model.maps(0.0, 0.0).baseline;
         let added = &base * (c - 1.0);
-        let (ds, dc) = counterfactual_effect(&before, &after, &added, run.pitch_mm, &opts.remove)
-            .map_err(|e| perr(&e))?;
         // Least-squares standard error of a scale on the model removal with white noise at the
         // calibration's noise floor, and the forward model's own accuracy, in quadrature.
         let ss: f64 = ndarray::Zip::from(&base)
@@ -648,14 +637,8 @@ pub fn analyse_run(run: &RunInput, opts: &Options) -> Result<RunAnalysis, Bonnet
         } else {
             1.0
         };
-        let (ns, nc) = draws.effect_sd(&added).map_err(|e| perr(&e))?;
-        causes.push(CauseEffect {
-            cause: "removal_rate".into(),
-            sigma1_nm: ds,
-            sigma1_sd_nm: (ds.abs() * rel).hypot(ns),
-            cr_rms: dc,
-            cr_rms_sd: (dc.abs() * rel).hypot(nc),
-        });
+        let cause = draws.cause_effect("removal_rate", &added, rel);
+        causes.push(cause.map_err(|e| perr(&e))?);
     }
     let effects = RunEffects {
         name: run.name.clone(),

@@ -186,6 +186,8 @@ pub fn attribute_difference(a: &RunEffects, b: &RunEffects) -> Difference {
 /// spread over the draws is the spread its own noise gives it (to first order in the noise).
 #[derive(Debug, Clone)]
 pub struct NoiseDraws {
+    before: Surface,
+    after: Surface,
     pairs: Vec<(Surface, Surface)>,
     pitch_mm: f64,
     remove: Vec<Term>,
@@ -218,6 +220,8 @@ impl NoiseDraws {
             }
         }
         Ok(NoiseDraws {
+            before: before.clone(),
+            after: after.clone(),
             pairs,
             pitch_mm,
             remove: remove.to_vec(),
@@ -252,6 +256,34 @@ impl NoiseDraws {
             cr.push(dc);
         }
         Ok((sd(&s1), sd(&cr)))
+    }
+}
+
+impl NoiseDraws {
+    /// The cause `name` that added `added_removal_nm` to the measured run: its counterfactual
+    /// effect on the measured maps, with an SD of `rel` x |effect| (the cause's own relative
+    /// uncertainty) and the maps' noise ([`Self::effect_sd`]) in quadrature.
+    pub fn cause_effect(
+        &self,
+        name: &str,
+        added_removal_nm: &Array2<f64>,
+        rel: f64,
+    ) -> Result<CauseEffect, VibrationError> {
+        let (ds, dc) = counterfactual_effect(
+            &self.before,
+            &self.after,
+            added_removal_nm,
+            self.pitch_mm,
+            &self.remove,
+        )?;
+        let (ns, nc) = self.effect_sd(added_removal_nm)?;
+        Ok(CauseEffect {
+            cause: name.to_string(),
+            sigma1_nm: ds,
+            sigma1_sd_nm: (ds.abs() * rel).hypot(ns),
+            cr_rms: dc,
+            cr_rms_sd: (dc.abs() * rel).hypot(nc),
+        })
     }
 }
 
