@@ -20,7 +20,7 @@ fn opt_nm(v: Option<f64>) -> String {
 /// What the prediction says about the measured difference between two bonnets: the predicted
 /// and the measured σ1 difference (nm, other − first) and a sentence. `measured` holds each
 /// run's name and its measured σ1 after polishing (nm); a prediction is matched to the run of
-/// its bonnet's name. None when either bonnet has no measured run.
+/// its bonnet's name; a pair with no measured run (or no predicted σ1) gets no sentence.
 pub fn against_measured(preds: &[PredictedMsf], measured: &[(String, f64)]) -> Vec<String> {
     let sigma = |name: &str| measured.iter().find(|(n, _)| n == name).map(|m| m.1);
     let Some((first, rest)) = preds.split_first() else {
