@@ -314,7 +314,7 @@ fn prune(
             ..clone_eval_shell(&ev)
         };
         let bg = base_gram(&reduced, sp);
-        if !holdout(&reduced, &extra, sp, &bg).significant() {
+        if !holdout(&reduced, &extra, sp, &bg).significant_for(e.kind()) {
             effects.remove(k);
             accepted.remove(k);
             return Ok(());
@@ -345,7 +345,15 @@ fn drop_negligible(
             continue;
         }
         let (e1, f1) = refine(p, &mut without, 2 * opts.refine_iters)?;
-        if f1.rss / f1.n.max(1.0) < (1.0 + crate::selection::MIN_FRACTION) * ms {
+        // A kind odd in the travel direction has no size bar (`selection::odd_in_travel`): it
+        // is negligible when what it takes from the sum of squares, in units of the residual
+        // mean square, is below Z_MIN^2 (a chi-square gain of z^2 per parameter).
+        let negligible = if crate::selection::odd_in_travel(effects[k].kind()) {
+            f1.rss - f.rss < Z_MIN * Z_MIN * ms
+        } else {
+            f1.rss / f1.n.max(1.0) < (1.0 + crate::selection::MIN_FRACTION) * ms
+        };
+        if negligible {
             *effects = without;
             accepted.remove(k);
             return Ok(Some((e1, f1)));
@@ -367,7 +375,7 @@ fn contenders_of(
     scores: &[Score],
     keep: impl Fn(&Candidate) -> bool,
 ) -> Vec<usize> {
-    let admitted = |i: usize| scores[i].significant() && keep(&cands[i]);
+    let admitted = |i: usize| scores[i].significant_for(cands[i].kind) && keep(&cands[i]);
     let top = (0..cands.len())
         .filter(|&i| admitted(i))
         .map(|i| scores[i].delta)
@@ -630,7 +638,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                         c.extra.len()
                     );
                 }
-                fallback::passes(s, c.extra.len())
+                fallback::passes(s, c.kind, c.extra.len())
             })
             .collect();
         let beyond_smooth: Vec<Option<f64>> = beyond_smooth

@@ -861,7 +861,11 @@ fn projections(sh: &Shape, hs: &[&[f64]], dt: &[f64]) -> Vec<f64> {
 }
 
 /// Whether a fallback's held-out score clears the stricter bar (see the module note).
-pub fn passes(s: &Score, n_params: usize) -> bool {
+pub fn passes(s: &Score, kind: &str, n_params: usize) -> bool {
+    if crate::selection::odd_in_travel(kind) {
+        // No size bar for a signal odd in the travel direction (`selection::odd_in_travel`).
+        return s.significant_for(kind) && s.z >= FALLBACK_Z;
+    }
     s.significant()
         && s.z >= FALLBACK_Z
         && s.fraction >= FALLBACK_FRACTION * (n_params.max(1) as f64).sqrt()
