@@ -691,6 +691,18 @@ fn signal_left(cal: &Calibration, sig: &SignalMap) -> f64 {
     }
 }
 
+/// A cut's median over the runs where it was measured (finite), and in brackets the share of
+/// them with at least 0.5; "-" when none was.
+fn median_and_half(cuts: impl Iterator<Item = f64>) -> String {
+    let v: Vec<f64> = cuts.filter(|v| v.is_finite()).collect();
+    if v.is_empty() {
+        return "-".into();
+    }
+    let half = v.iter().filter(|c| **c >= 0.5).count();
+    let n = v.len();
+    format!("{} ({})", fmt(median(v), 2), pct(half, n))
+}
+
 fn median(mut v: Vec<f64>) -> Option<f64> {
     v.retain(|x| x.is_finite());
     if v.is_empty() {
@@ -1039,32 +1051,8 @@ fn report(
             fmt(median(ok.iter().map(|o| o.final_over_floor).collect()), 2),
             fmt(median(ok.iter().map(|o| o.floor_over_true).collect()), 2),
             fmt(median(ok.iter().map(|o| o.cut).collect()), 2),
-            {
-                let ex: Vec<f64> = ok
-                    .iter()
-                    .map(|o| o.excess_cut)
-                    .filter(|v| v.is_finite())
-                    .collect();
-                let half = ex.iter().filter(|v| **v >= 0.5).count();
-                if ex.is_empty() {
-                    "-".to_string()
-                } else {
-                    format!("{} ({})", fmt(median(ex.clone()), 2), pct(half, ex.len()))
-                }
-            },
-            {
-                let sc: Vec<f64> = ok
-                    .iter()
-                    .map(|o| o.signal_cut)
-                    .filter(|v| v.is_finite())
-                    .collect();
-                let half = sc.iter().filter(|v| **v >= 0.5).count();
-                if sc.is_empty() {
-                    "-".to_string()
-                } else {
-                    format!("{} ({})", fmt(median(sc.clone()), 2), pct(half, sc.len()))
-                }
-            },
+            median_and_half(ok.iter().map(|o| o.excess_cut)),
+            median_and_half(ok.iter().map(|o| o.signal_cut)),
             pct(ok.iter().filter(|o| o.unexplained > 0).count(), n),
             pct(ok.iter().filter(|o| final_ok(o)).count(), n),
         );
