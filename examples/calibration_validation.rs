@@ -561,6 +561,35 @@ fn assess(kind: &str, truth: &Truth, cal: &Calibration, true_floor: f64) -> Outc
     o
 }
 
+/// A run's problem and baseline evaluation, and the injected effect's signal on it:
+/// `d = removal(effect) - removal(twin) = twin.after - run.after` (same before map) as the
+/// measured removal of `ev_d` (0 off the analysis pixels), and its baseline fit `fd`.
+struct Projected {
+    p: bonnetlab::calibrate::model::Problem,
+    ev: bonnetlab::calibrate::model::Eval,
+    ev_d: bonnetlab::calibrate::model::Eval,
+    fd: bonnetlab::calibrate::model::Fit,
+}
+
+fn projected(
+    run: &bonnetlab::calibrate::synth::SynthRun,
+    twin: &bonnetlab::calibrate::synth::SynthRun,
+    pixels: PixelSampling,
+) -> Result<Projected, String> {
+    use bonnetlab::calibrate::model::{evaluate, fit};
+    let p = run.problem_seen(pixels).map_err(|e| e.to_string())?;
+    let ev = evaluate(&p, &[], None).map_err(|e| e.to_string())?;
+    let d = p.compress(&(twin.after.heights_nm() - run.after.heights_nm()));
+    let mut ev_d = evaluate(&p, &[], Some(&ev)).map_err(|e| e.to_string())?;
+    ev_d.m = d
+        .iter()
+        .zip(&ev.w)
+        .map(|(v, w)| if *w > 0.0 && v.is_finite() { *v } else { 0.0 })
+        .collect();
+    let fd = fit(&ev_d, &[]).map_err(|e| e.to_string())?;
+    Ok(Projected { p, ev, ev_d, fd })
+}
+
 /// `--signal`: the effect's identifiable signal and its candidate column's fit (see the header).
 fn signal(
     kind: &str,
@@ -569,20 +598,9 @@ fn signal(
     pixels: PixelSampling,
 ) -> Result<String, String> {
     use bonnetlab::calibrate::effects::{candidates, Current};
-    use bonnetlab::calibrate::model::{evaluate, fit};
-    let p = run.problem_seen(pixels).map_err(|e| e.to_string())?;
-    let ev = evaluate(&p, &[], None).map_err(|e| e.to_string())?;
+    use bonnetlab::calibrate::model::fit;
+    let Projected { p, ev, ev_d, fd } = projected(run, twin, pixels)?;
     let f = fit(&ev, &[]).map_err(|e| e.to_string())?;
-    // d = removal(effect) - removal(twin) = twin.after - run.after (same before map).
-    let d_full = twin.after.heights_nm() - run.after.heights_nm();
-    let d = p.compress(&d_full);
-    let mut ev_d = evaluate(&p, &[], Some(&ev)).map_err(|e| e.to_string())?;
-    ev_d.m = d
-        .iter()
-        .zip(&ev.w)
-        .map(|(v, w)| if *w > 0.0 && v.is_finite() { *v } else { 0.0 })
-        .collect();
-    let fd = fit(&ev_d, &[]).map_err(|e| e.to_string())?;
     let sig = fd.rms();
     let cur = Current {
         p: &p,
@@ -636,18 +654,8 @@ fn baseline_signal(
     twin: &bonnetlab::calibrate::synth::SynthRun,
     pixels: PixelSampling,
 ) -> Result<(SignalMap, f64), String> {
-    use bonnetlab::calibrate::model::{evaluate, fit};
     use bonnetlab::calibrate::selection::{base_gram, holdout, split};
-    let p = run.problem_seen(pixels).map_err(|e| e.to_string())?;
-    let ev = evaluate(&p, &[], None).map_err(|e| e.to_string())?;
-    let d = p.compress(&(twin.after.heights_nm() - run.after.heights_nm()));
-    let mut ev_d = evaluate(&p, &[], Some(&ev)).map_err(|e| e.to_string())?;
-    ev_d.m = d
-        .iter()
-        .zip(&ev.w)
-        .map(|(v, w)| if *w > 0.0 && v.is_finite() { *v } else { 0.0 })
-        .collect();
-    let fd = fit(&ev_d, &[]).map_err(|e| e.to_string())?;
+    let Projected { p, ev, ev_d, fd } = projected(run, twin, pixels)?;
     let sp = split(&p);
     let oracle = holdout(
         &ev,
