@@ -291,3 +291,72 @@ fn no_output_prints_a_number_hundreds_of_digits_long() {
         assert!(out.contains("dx 1e"), "{out}");
     }
 }
+
+/// Session 40 (reliability.md §11's review): `--pixel-mm` was ignored without a word when the
+/// file gives its own pixel size. The file's is still used (a batch of mixed files takes the
+/// flag for the maps without one); psd, batch and compare now say so on stderr, naming the
+/// file and both sizes, and say nothing when the two agree or the file has none.
+#[test]
+fn a_pixel_size_the_file_overrides_is_named_on_stderr() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (own, own2, bare) = (d.join("own.csv"), d.join("own2.csv"), d.join("bare.csv"));
+    for (p, phase) in [(&own, 0.0), (&own2, 0.5)] {
+        csv_without_pixel_size(p, phase);
+        let t = std::fs::read_to_string(p).unwrap();
+        std::fs::write(p, format!("# dx_mm=0.1 dy_mm=0.1\n{t}")).unwrap();
+    }
+    csv_without_pixel_size(&bare, 0.0);
+    let stderr = |o: &Output| String::from_utf8_lossy(&o.stderr).to_string();
+    let named = |err: &str, file: &Path| {
+        let note: Vec<&str> = err.lines().filter(|l| l.starts_with("note: ")).collect();
+        assert_eq!(note.len(), 1, "{err}");
+        for part in [
+            file.display().to_string().as_str(),
+            "0.1000000 x 0.1000000 mm",
+            "--pixel-mm 0.5 x 0.5 mm",
+        ] {
+            assert!(note[0].contains(part), "{part} not in {}", note[0]);
+        }
+    };
+    let psd = |m: &Path, px: &str| {
+        bin()
+            .arg("psd")
+            .arg(m)
+            .args(["--pixel-mm", px, "--json"])
+            .output()
+            .unwrap()
+    };
+    let o = psd(&own, "0.5");
+    let v: serde_json::Value = serde_json::from_str(&ok(&o)).unwrap();
+    assert_eq!(v["dx_mm"], 0.1, "the file's pixel size is used");
+    named(&stderr(&o), &own);
+    for (m, px) in [(&own, "0.1"), (&bare, "0.5")] {
+        let o = psd(m, px);
+        let v: serde_json::Value = serde_json::from_str(&ok(&o)).unwrap();
+        assert_eq!(v["dx_mm"], px.parse::<f64>().unwrap());
+        assert!(!stderr(&o).contains("note:"), "{}", stderr(&o));
+    }
+    let o = bin()
+        .args(["batch", "--pixel-mm", "0.5"])
+        .arg(&own)
+        .output()
+        .unwrap();
+    let v: serde_json::Value = serde_json::from_str(ok(&o).lines().next().unwrap()).unwrap();
+    assert!(v.get("error").is_none() && v["dx_mm"] == 0.1, "{v}");
+    named(&stderr(&o), &own);
+    let run = format!("r={},{}", own.display(), own2.display());
+    let o = bin()
+        .args(["compare", "--run", &run, "--pixel-mm", "0.5", "--out"])
+        .arg(d.join("cmp"))
+        .output()
+        .unwrap();
+    ok(&o);
+    let err = stderr(&o);
+    assert_eq!(
+        err.lines().filter(|l| l.starts_with("note: ")).count(),
+        2,
+        "{err}"
+    );
+    assert!(err.contains(own2.display().to_string().as_str()), "{err}");
+}

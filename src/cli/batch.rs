@@ -106,20 +106,21 @@ pub fn list_inputs(input: &Path) -> Result<Vec<PathBuf>, CliError> {
     Ok(v)
 }
 
-/// One map's JSON line (an `error` object when it fails).
+/// One map's JSON line (an `error` object when it fails) and its note for stderr, if any.
 pub fn map_line(
     file: &Path,
     terms: &[Term],
     pitch_mm: Option<f64>,
     window: Window,
     pixel_mm: Option<(f64, f64)>,
-) -> Value {
+) -> (Value, Option<String>) {
     batch_value(file, terms, pitch_mm, window, pixel_mm).unwrap_or_else(|e| {
-        json!({
+        let v = json!({
             "file": file.display().to_string(),
             "error": super::compare::hint_pixel_mm(super::plain_message(&e.message)),
             "exit_code": e.code
-        })
+        });
+        (v, None)
     })
 }
 
@@ -146,7 +147,7 @@ pub fn run(args: &Args) -> Result<(), CliError> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
-    let work = || -> Vec<Value> {
+    let work = || -> Vec<(Value, Option<String>)> {
         files
             .par_iter()
             .map(|f| {
@@ -168,7 +169,10 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     let mut failed = 0;
     let mut codes: Vec<i64> = Vec::new();
     let mut text = String::new();
-    for v in &lines {
+    for (v, note) in &lines {
+        if let Some(n) = note {
+            eprintln!("note: {n}");
+        }
         if v.get("error").is_some() {
             failed += 1;
             codes.push(v.get("exit_code").and_then(Value::as_i64).unwrap_or(1));

@@ -152,6 +152,11 @@ pub fn compare_with_progress(
     };
     let r = compare(runs, settings, &step).map_err(to_cli);
     bar.finish_and_clear();
+    if let Ok(c) = &r {
+        for n in &c.notes {
+            eprintln!("note: {n}");
+        }
+    }
     r
 }
 

@@ -150,6 +150,9 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         pixel_mm: super::compare::pixel_size(args.pixel_mm, args.pixel_mm_y)?,
     };
     let report = psd(file, &opts)?;
+    for n in &report.notes {
+        eprintln!("note: {n}");
+    }
     // The CSV and the plot are published together or not at all.
     let mut outputs = super::Outputs::default();
     if let Some(out) = &args.csv {

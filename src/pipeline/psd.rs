@@ -127,16 +127,19 @@ pub struct PsdReport {
     /// Band RMS of the map itself over the MSF edges (figure / MSF / fine, areal split; they
     /// add up to the RMS after `removed`).
     pub bands: ArealBands,
+    /// Notes for the user (stderr, not the JSON): a `--pixel-mm` the file's own pixel size
+    /// overrides.
+    #[serde(skip)]
+    pub notes: Vec<String>,
 }
 
 /// Reads a map and computes its PSD report.
 pub fn psd(file: &Path, opts: &Options) -> Result<PsdReport, Error> {
     let mut surface = read_map(file)?;
-    if let Some((px, py)) = opts.pixel_mm {
-        surface.dx_mm = Some(surface.dx_mm.unwrap_or(px));
-        surface.dy_mm = Some(surface.dy_mm.unwrap_or(py));
-    }
-    analyse(&surface, file, opts)
+    let note = super::fill_pixel_size(&mut surface, opts.pixel_mm, file);
+    let mut report = analyse(&surface, file, opts)?;
+    report.notes.extend(note);
+    Ok(report)
 }
 
 fn spectrum_error(file: &Path, e: SpectrumError) -> Error {
@@ -272,5 +275,6 @@ pub fn analyse(s: &Surface, file: &Path, args: &Options) -> Result<PsdReport, Er
         ripple_reason,
         radial,
         bands,
+        notes: Vec::new(),
     })
 }

@@ -163,19 +163,17 @@ pub fn stats_report_with_bands(
 
 /// One map of a batch as its JSON object: the `stats --json` object of the map (read, the
 /// pixel size filled in where the file lacks it, `terms` removed) and, with a pitch, the
-/// `window` and the `ripple` object (as `psd`).
+/// `window` and the `ripple` object (as `psd`); beside it, the note of a `--pixel-mm` that the
+/// file's own pixel size overrides ([`super::fill_pixel_size`]).
 pub fn batch_value(
     file: &Path,
     terms: &[Term],
     pitch_mm: Option<f64>,
     window: Window,
     pixel_mm: Option<(f64, f64)>,
-) -> Result<Value, Error> {
+) -> Result<(Value, Option<String>), Error> {
     let mut s = read_map(file)?;
-    if let Some((px, py)) = pixel_mm {
-        s.dx_mm = Some(s.dx_mm.unwrap_or(px));
-        s.dy_mm = Some(s.dy_mm.unwrap_or(py));
-    }
+    let note = super::fill_pixel_size(&mut s, pixel_mm, file);
     let report = stats_report(file, &s, terms, false)?;
     let mut v = serde_json::to_value(&report).map_err(|e| Error::processing(file, e))?;
     if pitch_mm.is_some() && (s.dx_mm.is_none() || s.dy_mm.is_none()) {
@@ -191,7 +189,7 @@ pub fn batch_value(
                 )),
             );
         }
-        return Ok(v);
+        return Ok((v, note));
     }
     if let Some(p) = pitch_mm {
         let opts = PsdOptions {
@@ -215,5 +213,5 @@ pub fn batch_value(
             m.insert(key.into(), value);
         }
     }
-    Ok(v)
+    Ok((v, note))
 }

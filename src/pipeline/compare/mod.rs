@@ -167,7 +167,7 @@ pub fn compare(
         .iter()
         .flat_map(|r| r.before.iter().chain(&r.after))
         .collect();
-    let read: Vec<Result<Surface, CompareError>> = files
+    let read: Vec<Result<(Surface, Option<String>), CompareError>> = files
         .par_iter()
         .map(|p| {
             let mut s = bonnetlab_io::read_surface(p).map_err(|e| CompareError {
@@ -175,14 +175,17 @@ pub fn compare(
                 message: e.to_string(),
                 bad_input: e.exit_code() == 2,
             })?;
-            if let Some((px, py)) = settings.pixel_mm {
-                s.dx_mm = Some(s.dx_mm.unwrap_or(px));
-                s.dy_mm = Some(s.dy_mm.unwrap_or(py));
-            }
-            Ok(s)
+            let note = crate::pipeline::fill_pixel_size(&mut s, settings.pixel_mm, p);
+            Ok((s, note))
         })
         .collect();
-    let mut read = read.into_iter();
+    let mut notes = Vec::new();
+    let mut read = read.into_iter().map(|r| {
+        r.map(|(s, note)| {
+            notes.extend(note);
+            s
+        })
+    });
     let mut results = Vec::with_capacity(runs.len());
     for r in runs {
         let mut surfaces = Vec::with_capacity(r.before.len() + r.after.len());
@@ -203,6 +206,7 @@ pub fn compare(
         version: env!("CARGO_PKG_VERSION").into(),
         settings: settings_report(settings),
         runs: results,
+        notes,
     })
 }
 

@@ -187,6 +187,10 @@ pub struct Comparison {
     pub version: String,
     pub settings: SettingsReport,
     pub runs: Vec<RunResult>,
+    /// Notes for the user (stderr, not the report): a `--pixel-mm` a file's own pixel size
+    /// overrides.
+    #[serde(skip)]
+    pub notes: Vec<String>,
 }
 
 /// Settings as written to the report.
