@@ -85,3 +85,68 @@ fn bad_input_is_one_line_with_exit_code_2() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
 }
+
+/// Unit slips were calibrated without a word (reports/reliability.md, section 11: a spot's
+/// `dwell_s` in ms gave rate_scale 1011.7, exit 0). The sample run as shipped has no warning;
+/// its recipe with `dwell_s` 200 (ms for 0.2 s) and with the two maps swapped each warn on
+/// stderr, naming the recipe, and in the JSON's `warnings`, and the run still completes.
+#[test]
+fn a_unit_slip_or_swapped_maps_are_warned_about() {
+    let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/original");
+    let dir = tempfile::tempdir().unwrap();
+    for f in ["before.dat", "after.dat", "spot.dat", "path.csv"] {
+        std::fs::copy(src.join(f), dir.path().join(f)).unwrap();
+    }
+    let recipe = std::fs::read_to_string(src.join("recipe.toml")).unwrap();
+    assert!(recipe.contains("dwell_s = 0.2") && recipe.contains("before = \"before.dat\""));
+    let cases = [
+        ("shipped", recipe.clone(), None),
+        (
+            "ms",
+            recipe.replace("dwell_s = 0.2", "dwell_s = 200"),
+            Some("a unit slip is likely"),
+        ),
+        (
+            "swapped",
+            recipe
+                .replace("before = \"before.dat\"", "before = \"X\"")
+                .replace("after = \"after.dat\"", "after = \"before.dat\"")
+                .replace("before = \"X\"", "before = \"after.dat\""),
+            Some("not swapped"),
+        ),
+    ];
+    for (name, text, warning) in cases {
+        let r = dir.path().join(format!("{name}.toml"));
+        std::fs::write(&r, text).unwrap();
+        let o = bin().arg("calibrate").arg(&r).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{name}: {err}");
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let scale = v["baseline"]["rate_scale"].as_f64().unwrap();
+        match warning {
+            None => {
+                assert!(v.get("warnings").is_none(), "{name}: {v:.300}");
+                assert!(!err.contains("warning:"), "{name}: {err}");
+                assert!((scale - 1.0).abs() < 0.1, "{name}: rate_scale {scale}");
+            }
+            Some(w) => {
+                let ws = v["warnings"].as_array().expect("warnings");
+                assert!(
+                    ws.len() == 1 && ws[0].as_str().unwrap().contains(w),
+                    "{ws:?}"
+                );
+                let line = err.lines().find(|l| l.starts_with("warning: ")).unwrap();
+                assert!(
+                    line.contains(r.to_str().unwrap()) && line.contains(w),
+                    "{line}"
+                );
+            }
+        }
+        if name == "ms" {
+            assert!((scale / 1000.0 - 1.0).abs() < 0.1, "rate_scale {scale}");
+        }
+        if name == "swapped" {
+            assert!(scale < 0.0, "rate_scale {scale}");
+        }
+    }
+}

@@ -33,6 +33,9 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     bar.set_message("calibrating (baseline fit, candidate effects, hold-out tests)");
     let cal = calibrate(&args.recipe, &problem, &Options::default())?;
     bar.finish_and_clear();
+    for w in &cal.warnings {
+        eprintln!("warning: {}: {w}", args.recipe.display());
+    }
     let text = serde_json::to_string_pretty(&cal)
         .map_err(|e| CliError::processing(&args.recipe, e))?
         + "\n";

@@ -94,6 +94,9 @@ pub fn report_html(cal: &Calibration, recipe: &Path) -> Result<String, String> {
         fixed(cal.noise_floor_band_per_mm[0], 3),
         fixed(cal.noise_floor_band_per_mm[1], 3)
     ));
+    for w in &cal.warnings {
+        page.note(&format!("Warning: {w}."));
+    }
     if let Some(r) = cal.repeatability_nm {
         page.note(&match &cal.repeatability_note {
             Some(why) => format!("Repeatability: {why}."),

@@ -1,7 +1,8 @@
 //! Developer probe: generate a run with one injected effect (by name) and calibrate it.
 //! `cargo run --release -p bonnetlab-calibrate --example try_effect -- drift [N]`
 //! N: an N x N map of a 100 mm part (default: the 160 x 180 test run). Environment: SEED,
-//! NOISE (nm), APERTURE (disc diameter, mm), SAMPLE_HZ (path log rate), WRITE (also write the run
+//! REALISTIC (with N: `SynthConfig::realistic`, power-law texture 2.2), PITCH (mm), LAG (mm),
+//! CLEAN (no map or spot noise, no dropouts, a centred spot), NOISE (nm), APERTURE (disc diameter, mm), SAMPLE_HZ (path log rate), WRITE (also write the run
 //! directory there, for the CLI), BONNETLAB_TRACE (timings per round). Prints the
 //! effects found, each round's best candidates and the timings to stderr, the JSON to stdout.
 use bonnetlab_calibrate::run::{calibrate, Options};
@@ -20,7 +21,12 @@ fn main() {
             fraction_per_run: -0.25,
         }],
         "scale" => vec![Injected::TifScale { scale: 1.12 }],
-        "lag" => vec![Injected::DirectionLag { lag_mm: 0.4 }],
+        "lag" => vec![Injected::DirectionLag {
+            lag_mm: std::env::var("LAG")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(0.4),
+        }],
         "wiggle" => vec![Injected::reference_wiggle()],
         "cov" => vec![Injected::RateCovariate {
             covariate: "height".into(),
@@ -83,22 +89,36 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(11);
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
-    let mut cfg = SynthConfig {
-        effects: eff,
-        seed,
-        aperture_diameter_mm: env("APERTURE"),
-        ..SynthConfig::default()
+    let n_arg = std::env::args()
+        .nth(2)
+        .and_then(|s| s.parse::<usize>().ok());
+    let mut cfg = match (std::env::var("REALISTIC").is_ok(), n_arg) {
+        (true, Some(n)) => SynthConfig::realistic(
+            seed,
+            n,
+            100.0,
+            bonnetlab_calibrate::synth::InitialSurface::realistic_texture(2.2),
+        ),
+        _ => SynthConfig::default(),
     };
+    cfg.effects = eff;
+    cfg.seed = seed;
+    cfg.aperture_diameter_mm = env("APERTURE");
+    if let Some(p) = env("PITCH") {
+        cfg.pitch_mm = p;
+    }
+    if std::env::var("CLEAN").is_ok() {
+        (cfg.noise_nm, cfg.noise_after_nm, cfg.spot_noise_nm) = (0.0, Some(0.0), 0.0);
+        cfg.spot_offset_mm = (0.0, 0.0);
+        (cfg.dropout_fraction, cfg.dropout_discs) = (0.0, 0);
+    }
     if let Some(n) = env("NOISE") {
         cfg.noise_nm = n;
     }
     if let Some(hz) = env("SAMPLE_HZ") {
         cfg.sample_hz = hz;
     }
-    if let Some(n) = std::env::args()
-        .nth(2)
-        .and_then(|s| s.parse::<usize>().ok())
-    {
+    if let Some(n) = n_arg.filter(|_| std::env::var("REALISTIC").is_err()) {
         (cfg.rows, cfg.cols, cfg.pixel_mm, cfg.deposit_step_mm) = (n, n, 100.0 / n as f64, 0.2);
     }
     let t = std::time::Instant::now();
