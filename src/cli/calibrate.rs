@@ -33,9 +33,6 @@ pub fn run(args: &Args) -> Result<(), CliError> {
     bar.set_message("calibrating (baseline fit, candidate effects, hold-out tests)");
     let cal = calibrate(&args.recipe, &problem, &Options::default())?;
     bar.finish_and_clear();
-    for w in &cal.warnings {
-        eprintln!("warning: {}: {w}", args.recipe.display());
-    }
     let text = serde_json::to_string_pretty(&cal)
         .map_err(|e| CliError::processing(&args.recipe, e))?
         + "\n";
@@ -55,6 +52,10 @@ pub fn run(args: &Args) -> Result<(), CliError> {
         outputs.file(out, text.as_bytes())?;
     }
     outputs.publish()?;
+    // After the outputs are in place: a run that fails prints its one error line alone.
+    for w in &cal.warnings {
+        eprintln!("warning: {}: {w}", args.recipe.display());
+    }
     let json_on_stdout = match &args.json {
         Some(out) => super::is_stdout(out),
         None => args.out.is_none(),
