@@ -1581,13 +1581,17 @@ mod tests {
             cand("rate_drift", 1),
             cand("rate_map", 35),
         ];
-        let scores = vec![score(0.44), score(0.45), score(0.58)];
+        let scores = vec![score(0.40), score(0.41), score(0.58)];
         let (c, lib) = round_contenders(&cands, &scores);
         // The library's first by parsimony (one column) goes first, then the fallback's.
         assert_eq!(c, vec![1, 2]);
         assert_eq!(lib, Some(1));
+        // Library kinds within 25 % of the map's reduction (simpler candidates, session 40)
+        // contend in their own right, simplest first: nothing inserted.
+        let scores = vec![score(0.44), score(0.45), score(0.58)];
+        assert_eq!(round_contenders(&cands, &scores), (vec![1, 0, 2], None));
         // A library kind among the leaders: nothing inserted.
-        let scores = vec![score(0.44), score(0.56), score(0.58)];
+        let scores = vec![score(0.40), score(0.56), score(0.58)];
         assert_eq!(round_contenders(&cands, &scores), (vec![1, 2], None));
         // No significant library kind: the fallback alone.
         let weak = Score {
