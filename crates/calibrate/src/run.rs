@@ -399,7 +399,7 @@ const CONTEND_FRACTION: f64 = 0.9;
 
 /// The same share for a candidate with fewer columns than the best one. A flexible candidate
 /// takes some of the forward model's own error beside the mechanism it shares with a simpler
-/// one: a path wiggle in x along y at twice the pitch (4 parameters) is a direction lag (1) on
+/// one: a path wiggle in x along y at twice the pitch (3 parameters) is a direction lag (1) on
 /// a raster whose lines alternate, and took 0.0137 of a harness run's held-out sum of squares
 /// to the lag's 0.0110 (400 x 400, 3 mm pitch, 0.4 mm lag). Within this share the simpler one
 /// is refined too, and [`settle`] keeps it unless the flexible one leaves less than half its
@@ -411,9 +411,10 @@ const CONTEND_FRACTION_SIMPLER: f64 = 0.75;
 /// for one with fewer columns than the best), the one with the fewest parameters first, then
 /// the earlier kind in `PRIORITY` (the spec's table first: e.g. a time drift before a rate
 /// varying with y, which a raster makes nearly collinear), then the larger reduction. One
-/// contender per kind, at most three, the best one always among them: near-ties of different
-/// kinds (a slow rate oscillation vs a path wiggle along y on a raster, which compresses the
-/// line spacing) are settled by refining each and comparing the refined fits (`settle`).
+/// contender per kind, at most three, the best one's kind always among them: near-ties of
+/// different kinds (a slow rate oscillation vs a path wiggle along y on a raster, which
+/// compresses the line spacing) are settled by refining each and comparing the refined fits
+/// (`settle`).
 fn contenders_of(
     cands: &[Candidate],
     scores: &[Score],
