@@ -415,6 +415,17 @@ fn effect(kind: &str, size: f64, rng: &mut Rng) -> Truth {
     t
 }
 
+/// The candidate kind whose held-out z the oracle is held to (`Score::for_kind`): a kind's
+/// library name, and for the direction rate outside the library the fallback's rate per
+/// direction that finds it.
+fn oracle_kind(kind: &str) -> &str {
+    if kind == "direction_rate" {
+        "rate_per_direction"
+    } else {
+        lib_name(kind)
+    }
+}
+
 fn lib_name(kind: &str) -> &str {
     if kind == "rate_profile" {
         "rate_profile_time"
@@ -650,6 +661,7 @@ fn signal(
 /// below `Z_MIN` bounds the detection rate any candidate could reach at the selection's bar.
 type SignalMap = (ndarray::Array2<f64>, ndarray::Array2<bool>);
 fn baseline_signal(
+    kind: &str,
     run: &bonnetlab::calibrate::synth::SynthRun,
     twin: &bonnetlab::calibrate::synth::SynthRun,
     pixels: PixelSampling,
@@ -662,7 +674,8 @@ fn baseline_signal(
         std::slice::from_ref(&ev_d.m),
         &sp,
         &base_gram(&ev, &sp),
-    );
+    )
+    .for_kind(oracle_kind(kind));
     Ok((p.expand(&fd.resid, &ev.w), oracle.z))
 }
 
@@ -798,7 +811,7 @@ fn main() {
                                     .unwrap_or_else(|e| format!("failed: {e}"))
                             );
                         }
-                        match baseline_signal(&run, &tw, args.pixels) {
+                        match baseline_signal(kind, &run, &tw, args.pixels) {
                             Ok(m) => base_sig = Some(m),
                             Err(e) => eprintln!("{kind} x{size} run {r}: signal: {e}"),
                         }
@@ -970,7 +983,7 @@ fn report(
         "Columns: *detected* = the kind accepted (library kinds; a covariate must name the right covariate) or, for \
          kinds outside the library, anything reported (an accepted effect or an `unexplained` entry); on null runs, \
          *false positive* = any effect accepted. *oracle >= z4* = runs where the oracle candidate, the injected effect's own signal (the run's after map minus \
-         its twin's) as the column, reaches the selection's held-out z bar (`Z_MIN` = 4): no candidate built from the data \
+         its twin's) as the column, reaches the selection's held-out z bar (`Z_MIN` = 4; the z the kind's candidate is held to, `Score::for_kind`): no candidate built from the data \
          explains the signal better, so this bounds the detection any candidate could reach (every kind but null and \
          registration). *other* = runs where some other kind was also accepted. *param err* = \
          median over detected runs of the largest relative parameter error (registration and path offsets relative to the \

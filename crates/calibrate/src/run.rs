@@ -346,7 +346,10 @@ fn prune(
             ..clone_eval_shell(&ev)
         };
         let bg = base_gram(&reduced, sp);
-        if !holdout(&reduced, &extra, sp, &bg).significant_for(e.kind()) {
+        if !holdout(&reduced, &extra, sp, &bg)
+            .for_kind(e.kind())
+            .significant_for(e.kind())
+        {
             effects.remove(k);
             accepted.remove(k);
             return Ok(());
@@ -629,7 +632,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
         let bg = base_gram(&ev, &sp);
         let scores: Vec<Score> = cands
             .par_iter()
-            .map(|c| holdout(&ev, &c.extra, &sp, &bg))
+            .map(|c| holdout(&ev, &c.extra, &sp, &bg).for_kind(c.kind))
             .collect();
         // Rate candidates significant on the data, scored again beyond a smooth additive
         // difference between the measurements (`fallback::smooth_additive_columns` says why).
@@ -660,7 +663,9 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
                 let beyond: Vec<Option<Score>> = cands
                     .par_iter()
                     .zip(&scores)
-                    .map(|(c, s)| to_check(c, s).then(|| holdout(&ev, &c.extra, &sp, &bg_s)))
+                    .map(|(c, s)| {
+                        to_check(c, s).then(|| holdout(&ev, &c.extra, &sp, &bg_s).for_kind(c.kind))
+                    })
                     .collect();
                 let (sc, bz, dm) = judged_beyond_smooth(&cands, scores, &beyond, &alone);
                 beyond_smooth = bz;
@@ -769,7 +774,7 @@ pub fn calibrate(p: &Problem, opts: &Options) -> Result<Calibration, CalibrateEr
             }
             if !explained {
                 if let Some(c) = crate::effects::tif_scale::scanned(&cur) {
-                    scores[ti] = holdout(&ev, &c.extra, &sp, &bg);
+                    scores[ti] = holdout(&ev, &c.extra, &sp, &bg).for_kind(c.kind);
                     cands[ti] = c;
                 }
             }
@@ -1179,6 +1184,7 @@ fn judged_beyond_smooth(
             delta: s.delta.min(b.delta),
             z: s.z.min(b.z),
             fraction: s.fraction.min(b.fraction),
+            z_localised: s.z_localised.min(b.z_localised),
         });
     }
     (sc, zb, dm)
@@ -1408,6 +1414,7 @@ mod tests {
             delta,
             z: 8.0,
             fraction: 0.02,
+            z_localised: 8.0,
         };
         // The harness run's case: wiggle 0.0137, lag 0.0110 (0.80 of it).
         let cands = vec![
@@ -1442,6 +1449,7 @@ mod tests {
             delta: 361.0,
             z: 9.0,
             fraction: 0.5,
+            z_localised: 9.0,
         };
         let c = SmoothCheck::of(&alone, 100.0, None, 0.75);
         assert!((c.map_rms_nm - 1.9).abs() < 1e-12 && c.applied && c.drift_bound_nm.is_none());
@@ -1499,6 +1507,7 @@ mod tests {
             delta,
             z: 10.0,
             fraction: 0.1,
+            z_localised: 10.0,
         }
     }
 
@@ -1507,6 +1516,7 @@ mod tests {
             delta,
             z,
             fraction: delta / 100.0,
+            z_localised: z,
         }
     }
 
