@@ -447,6 +447,28 @@ mod tests {
         assert!(block_z(&null, &s) < 0.0, "{}", block_z(&null, &s));
     }
 
+    /// Only kinds odd in the travel direction are judged by the localised z; every other kind
+    /// keeps the plain one its bars were set with.
+    #[test]
+    fn only_odd_kinds_take_the_localised_z() {
+        let s = Score {
+            z_localised: 9.0,
+            ..score(3.0, 0.001)
+        };
+        assert_eq!(s.for_kind("direction_lag").z, 9.0);
+        assert_eq!(s.for_kind("rate_per_direction").z, 9.0);
+        for k in [
+            "rate_map",
+            "tif_scale",
+            "periodic_path_error",
+            "rate_per_line",
+        ] {
+            assert_eq!(s.for_kind(k).z, 3.0, "{k}");
+        }
+        assert!(s.for_kind("direction_lag").significant_for("direction_lag"));
+        assert!(!s.for_kind("rate_map").significant_for("rate_map"));
+    }
+
     /// Kinds odd in the travel direction need only the z: a lag at z 5 and 0.1 % of the sum of
     /// squares is significant, the same score of a TIF scale is not; under Z_MIN or with a
     /// loss neither is.
