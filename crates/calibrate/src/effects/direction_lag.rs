@@ -102,12 +102,9 @@ fn secant(cur: &Current, linear: &[f64]) -> Option<Vec<f64>> {
     if !(l1.is_finite() && l1.abs() > 1e-6 && l1.abs() <= cur.p.tif_radius_mm) {
         return None;
     }
-    let s = &cur.p.samples;
+    // The current executed path lagged by l1, as the effect itself moves it.
     let mut lagged = ev.exec.clone();
-    for k in 0..lagged.x_mm.len().min(s.len()) {
-        lagged.x_mm[k] -= l1 * s.ux[k];
-        lagged.y_mm[k] -= l1 * s.uy[k];
-    }
+    DirectionLag { lag_mm: l1 }.perturb(cur.p, &mut lagged.x_mm, &mut lagged.y_mm);
     let moved = cur
         .p
         .channel_column(&ev.kernels, Channel::Value, &lagged, None)
