@@ -10,7 +10,13 @@
 //! cargo run --release --example calibration_validation -- [--runs 50] [--size 400]
 //!     [--seed 1] [--sizes 0.5,1,2] [--kinds null,registration,...] [--out reports/calibration.md]
 //!     [--no-time] [--signal] [--repeatability declared|none] [--drift-nm D]
+//!     [--pixel-average N] [--pixels point|area] [--spot-pixel MM] [--noise-scale F]
 //! ```
+//!
+//! `--spot-pixel MM` (default: the map's pixel) measures the spot on pixels of its own size;
+//! `--noise-scale F` (default 1) multiplies the maps' and the spot's white noise. Both are
+//! diagnostics, to tell a bias that comes from the spot's sampling or the model grid from one
+//! that comes from noise.
 //!
 //! `--drift-nm D` (default 0): the synthetic instrument also drifts between its two
 //! measurements: a smooth random field of D nm RMS (20 mm correlation) added to each after map
@@ -92,6 +98,12 @@ struct Args {
     declare_repeatability: bool,
     /// The instrument's smooth drift between the two maps (nm RMS; 0: none).
     drift_nm: f64,
+    /// The measured spot's pixel (mm; `None`: the map's), to tell the spot's sampling from the
+    /// model grid's in a bias.
+    spot_pixel_mm: Option<f64>,
+    /// Multiplies the maps' and the spot's white noise (1: the scenario's), to tell a bias
+    /// from noise.
+    noise_scale: f64,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -112,6 +124,8 @@ fn parse_args() -> Result<Args, String> {
         pixels: PixelSampling::Point,
         declare_repeatability: true,
         drift_nm: 0.0,
+        spot_pixel_mm: None,
+        noise_scale: 1.0,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -144,6 +158,19 @@ fn parse_args() -> Result<Args, String> {
                 a.drift_nm = val()?.parse().map_err(|e| format!("--drift-nm: {e}"))?;
                 if !(a.drift_nm >= 0.0 && a.drift_nm.is_finite()) {
                     return Err(format!("--drift-nm must be >= 0, got {}", a.drift_nm));
+                }
+            }
+            "--spot-pixel" => {
+                let v: f64 = val()?.parse().map_err(|e| format!("--spot-pixel: {e}"))?;
+                if !(v > 0.0 && v.is_finite()) {
+                    return Err(format!("--spot-pixel must be > 0 mm, got {v}"));
+                }
+                a.spot_pixel_mm = Some(v);
+            }
+            "--noise-scale" => {
+                a.noise_scale = val()?.parse().map_err(|e| format!("--noise-scale: {e}"))?;
+                if !(a.noise_scale > 0.0 && a.noise_scale.is_finite()) {
+                    return Err(format!("--noise-scale must be > 0, got {}", a.noise_scale));
                 }
             }
             "--repeatability" => {
@@ -218,6 +245,8 @@ fn scenario(args: &Args, r: usize, reals: &[PathBuf]) -> SynthConfig {
         0.3 * (2.0 * rng.uniform() - 1.0),
     );
     let discs = 2 + rng.below(4);
+    let realistic = SynthConfig::realistic(mix(args.seed, 2, r as u64), n, 100.0, surface);
+    let spot_noise_nm = realistic.spot_noise_nm * args.noise_scale;
     SynthConfig {
         pitch_mm: pitch,
         deposit_step_mm: (0.25 * d).min(0.06),
@@ -225,8 +254,10 @@ fn scenario(args: &Args, r: usize, reals: &[PathBuf]) -> SynthConfig {
         dropout_discs: discs,
         pixel_average: args.pixel_average,
         drift_nm: args.drift_nm,
-        ..SynthConfig::realistic(mix(args.seed, 2, r as u64), n, 100.0, surface)
-            .with_noise_nm(noise_b, noise_a)
+        spot_pixel_mm: args.spot_pixel_mm,
+        spot_noise_nm,
+        ..realistic
+            .with_noise_nm(noise_b * args.noise_scale, noise_a * args.noise_scale)
             .with_round_aperture(r % 2 == 1, 90.0)
     }
 }
@@ -943,7 +974,9 @@ fn report(
             String::new()
         } + if args.pixels == PixelSampling::Area { " --pixels area" } else { "" },
         (if args.declare_repeatability { String::new() } else { " --repeatability none".to_string() })
-            + &if args.drift_nm > 0.0 { format!(" --drift-nm {}", args.drift_nm) } else { String::new() },
+            + &if args.drift_nm > 0.0 { format!(" --drift-nm {}", args.drift_nm) } else { String::new() }
+            + &args.spot_pixel_mm.map_or(String::new(), |v| format!(" --spot-pixel {v}"))
+            + &if args.noise_scale != 1.0 { format!(" --noise-scale {}", args.noise_scale) } else { String::new() },
         args.runs,
         args.size,
         args.size,
