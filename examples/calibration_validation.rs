@@ -11,12 +11,15 @@
 //!     [--seed 1] [--sizes 0.5,1,2] [--kinds null,registration,...] [--out reports/calibration.md]
 //!     [--no-time] [--signal] [--repeatability declared|none] [--drift-nm D]
 //!     [--pixel-average N] [--pixels point|area] [--spot-pixel MM] [--noise-scale F]
+//!     [--deposit-step MM]
 //! ```
 //!
 //! `--spot-pixel MM` (default: the map's pixel) measures the spot on pixels of its own size;
-//! `--noise-scale F` (default 1) multiplies the maps' and the spot's white noise. Both are
-//! diagnostics, to tell a bias that comes from the spot's sampling or the model grid from one
-//! that comes from noise.
+//! `--noise-scale F` (default 1) multiplies the maps' and the spot's white noise;
+//! `--deposit-step MM` (default a quarter map pixel, at most 0.06 mm) sets the generator's
+//! exact-deposition sub-step. All three are diagnostics, to tell a bias that comes from the
+//! spot's sampling, the model grid or the generator's own quadrature from one that comes from
+//! noise.
 //!
 //! `--drift-nm D` (default 0): the synthetic instrument also drifts between its two
 //! measurements: a smooth random field of D nm RMS (20 mm correlation) added to each after map
@@ -104,6 +107,9 @@ struct Args {
     /// Multiplies the maps' and the spot's white noise (1: the scenario's), to tell a bias
     /// from noise.
     noise_scale: f64,
+    /// The generator's exact-deposition sub-step (mm; `None`: a quarter map pixel, at most
+    /// 0.06 mm), to tell the generator's own quadrature from the model's in a bias.
+    deposit_step_mm: Option<f64>,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -126,6 +132,7 @@ fn parse_args() -> Result<Args, String> {
         drift_nm: 0.0,
         spot_pixel_mm: None,
         noise_scale: 1.0,
+        deposit_step_mm: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(k) = it.next() {
@@ -172,6 +179,13 @@ fn parse_args() -> Result<Args, String> {
                 if !(a.noise_scale > 0.0 && a.noise_scale.is_finite()) {
                     return Err(format!("--noise-scale must be > 0, got {}", a.noise_scale));
                 }
+            }
+            "--deposit-step" => {
+                let v: f64 = val()?.parse().map_err(|e| format!("--deposit-step: {e}"))?;
+                if !(v > 0.0 && v.is_finite()) {
+                    return Err(format!("--deposit-step must be > 0 mm, got {v}"));
+                }
+                a.deposit_step_mm = Some(v);
             }
             "--repeatability" => {
                 a.declare_repeatability = match val()?.as_str() {
@@ -249,7 +263,7 @@ fn scenario(args: &Args, r: usize, reals: &[PathBuf]) -> SynthConfig {
     let spot_noise_nm = realistic.spot_noise_nm * args.noise_scale;
     SynthConfig {
         pitch_mm: pitch,
-        deposit_step_mm: (0.25 * d).min(0.06),
+        deposit_step_mm: args.deposit_step_mm.unwrap_or((0.25 * d).min(0.06)),
         spot_offset_mm: off,
         dropout_discs: discs,
         pixel_average: args.pixel_average,
@@ -976,12 +990,13 @@ fn report(
         (if args.declare_repeatability { String::new() } else { " --repeatability none".to_string() })
             + &if args.drift_nm > 0.0 { format!(" --drift-nm {}", args.drift_nm) } else { String::new() }
             + &args.spot_pixel_mm.map_or(String::new(), |v| format!(" --spot-pixel {v}"))
-            + &if args.noise_scale != 1.0 { format!(" --noise-scale {}", args.noise_scale) } else { String::new() },
+            + &if args.noise_scale != 1.0 { format!(" --noise-scale {}", args.noise_scale) } else { String::new() }
+            + &args.deposit_step_mm.map_or(String::new(), |v| format!(" --deposit-step {v}")),
         args.runs,
         args.size,
         args.size,
         100.0 / args.size as f64,
-        (0.25 * 100.0 / args.size as f64).min(0.06),
+        args.deposit_step_mm.unwrap_or((0.25 * 100.0 / args.size as f64).min(0.06)),
         reals.len(),
         if args.pixel_average > 1 {
             format!(
