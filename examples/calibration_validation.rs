@@ -112,6 +112,15 @@ struct Args {
     deposit_step_mm: Option<f64>,
 }
 
+/// Option `k`'s value `v` as a finite number above 0 (the error names the option).
+fn positive(k: &str, v: &str) -> Result<f64, String> {
+    match v.parse::<f64>() {
+        Ok(x) if x > 0.0 && x.is_finite() => Ok(x),
+        Ok(x) => Err(format!("{k} must be > 0, got {x}")),
+        Err(e) => Err(format!("{k}: {e}")),
+    }
+}
+
 fn parse_args() -> Result<Args, String> {
     let mut a = Args {
         runs: 50,
@@ -167,26 +176,9 @@ fn parse_args() -> Result<Args, String> {
                     return Err(format!("--drift-nm must be >= 0, got {}", a.drift_nm));
                 }
             }
-            "--spot-pixel" => {
-                let v: f64 = val()?.parse().map_err(|e| format!("--spot-pixel: {e}"))?;
-                if !(v > 0.0 && v.is_finite()) {
-                    return Err(format!("--spot-pixel must be > 0 mm, got {v}"));
-                }
-                a.spot_pixel_mm = Some(v);
-            }
-            "--noise-scale" => {
-                a.noise_scale = val()?.parse().map_err(|e| format!("--noise-scale: {e}"))?;
-                if !(a.noise_scale > 0.0 && a.noise_scale.is_finite()) {
-                    return Err(format!("--noise-scale must be > 0, got {}", a.noise_scale));
-                }
-            }
-            "--deposit-step" => {
-                let v: f64 = val()?.parse().map_err(|e| format!("--deposit-step: {e}"))?;
-                if !(v > 0.0 && v.is_finite()) {
-                    return Err(format!("--deposit-step must be > 0 mm, got {v}"));
-                }
-                a.deposit_step_mm = Some(v);
-            }
+            "--spot-pixel" => a.spot_pixel_mm = Some(positive(&k, &val()?)?),
+            "--noise-scale" => a.noise_scale = positive(&k, &val()?)?,
+            "--deposit-step" => a.deposit_step_mm = Some(positive(&k, &val()?)?),
             "--repeatability" => {
                 a.declare_repeatability = match val()?.as_str() {
                     "declared" => true,
